@@ -1,1 +1,48 @@
-fn main(){}
+//! `crm`: the command-line front of crm-grasp. Thin glue over the library crates.
+
+mod commands;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "crm", version, about = "Task-oriented dexterous grasping with a Contextual Reward Machine")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Start crm-grasp on this machine (today: the scripted oracle over the benchmark).
+    Up(commands::oracle::OracleArgs),
+    /// Run the scripted oracle (no learning) over the benchmark's tasks.
+    Oracle(commands::oracle::OracleArgs),
+    /// List the benchmark: objects, objectives, topologies and tasks.
+    Tasks(commands::tasks::TasksArgs),
+    /// Print the grasping CRM: stages, events, edges and rewards.
+    Spec(commands::tasks::SpecArgs),
+    /// Benchmarks that print figures.
+    #[command(subcommand)]
+    Bench(commands::bench::BenchCommand),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Up(args) => {
+            eprintln!("crm up: the training service is not built yet; running the scripted oracle over the benchmark");
+            commands::oracle::run(args)
+        }
+        Command::Oracle(args) => commands::oracle::run(args),
+        Command::Tasks(args) => commands::tasks::run(args),
+        Command::Spec(args) => commands::tasks::run_spec(args),
+        Command::Bench(command) => commands::bench::run(command),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            std::process::ExitCode::from(2)
+        }
+    }
+}

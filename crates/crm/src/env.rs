@@ -80,6 +80,11 @@ impl<E: Environment> CrmEnv<E> {
         &mut self.env
     }
 
+    /// Gives the machine and the environment back.
+    pub fn into_parts(self) -> (Machine, E) {
+        (self.machine, self.env)
+    }
+
     pub fn episode(&self) -> &Episode {
         &self.episode
     }

@@ -1,0 +1,133 @@
+//! The benchmark as data: 20 objects, 7 objectives, 6 topologies and 26 tasks, loaded from a
+//! JSON file (`crates/sim/data/benchmark.json` is built in) and validated.
+
+mod object;
+mod task;
+mod taxonomy;
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+pub use object::{Anchor, Axis, OBJECT_FEATURES, Object, ObjectFlags, Part, Shape};
+pub use task::{GraspLocation, Task};
+pub use taxonomy::{FINGERS, FingerShape, Fragility, Objective, Topology};
+
+use crate::error::{Error, Result, parse_json};
+
+const BUILTIN: &str = include_str!("../../data/benchmark.json");
+
+/// The whole benchmark.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Benchmark {
+    pub objects: Vec<Object>,
+    pub tasks: Vec<Task>,
+}
+
+impl Benchmark {
+    /// The benchmark that ships with the crate.
+    pub fn builtin() -> Self {
+        match Self::from_json(BUILTIN, "crates/sim/data/benchmark.json") {
+            Ok(benchmark) => benchmark,
+            // The built-in file is checked by the crate's tests.
+            Err(err) => panic!("built-in benchmark is invalid: {err}"),
+        }
+    }
+
+    /// Reads and validates a benchmark file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_json(&text, &path.display().to_string())
+    }
+
+    /// Parses and validates benchmark JSON; `origin` names the source in errors.
+    pub fn from_json(text: &str, origin: &str) -> Result<Self> {
+        let benchmark: Benchmark = parse_json(text, origin)?;
+        benchmark.validate(origin)?;
+        Ok(benchmark)
+    }
+
+    pub fn object(&self, name: &str) -> Option<&Object> {
+        self.objects.iter().find(|o| o.name == name)
+    }
+
+    pub fn task(&self, id: &str) -> Option<&Task> {
+        self.tasks.iter().find(|t| t.id == id)
+    }
+
+    /// The object a task refers to (validated to exist).
+    pub fn object_of(&self, task: &Task) -> &Object {
+        self.object(&task.object)
+            .unwrap_or_else(|| panic!("validated task {} names a missing object", task.id))
+    }
+
+    fn validate(&self, path: &str) -> Result<()> {
+        let invalid = |at: String, message: String| Error::Invalid {
+            path: path.to_string(),
+            at,
+            message,
+        };
+        let mut names = BTreeSet::new();
+        for (i, object) in self.objects.iter().enumerate() {
+            let at = format!("objects[{i}] ({})", object.name);
+            if !names.insert(object.name.as_str()) {
+                return Err(invalid(at, "duplicate object name".into()));
+            }
+            if !(object.mass.is_finite() && object.mass > 0.0) {
+                return Err(invalid(format!("{at}.mass"), format!("must be positive, got {}", object.mass)));
+            }
+            if !(object.friction.is_finite() && (0.0..=2.0).contains(&object.friction)) {
+                return Err(invalid(format!("{at}.friction"), format!("must be in [0, 2], got {}", object.friction)));
+            }
+            if object.parts.is_empty() {
+                return Err(invalid(format!("{at}.parts"), "an object needs at least one part".into()));
+            }
+            for (k, part) in object.parts.iter().enumerate() {
+                let dims = part.shape.dimensions();
+                if dims.iter().any(|d| !(d.is_finite() && *d > 0.0)) || part.pos.iter().any(|p| !p.is_finite()) {
+                    return Err(invalid(format!("{at}.parts[{k}]"), "sizes must be positive and positions finite".into()));
+                }
+            }
+            if let Some(anchor) = &object.anchor {
+                if !(anchor.resist_torque.is_finite() && anchor.resist_torque > 0.0) {
+                    return Err(invalid(format!("{at}.anchor.resist_torque"), "must be positive".into()));
+                }
+            }
+        }
+        let mut ids = BTreeSet::new();
+        for (i, task) in self.tasks.iter().enumerate() {
+            let at = format!("tasks[{i}] ({})", task.id);
+            if !ids.insert(task.id.as_str()) {
+                return Err(invalid(at, "duplicate task id".into()));
+            }
+            let Some(object) = self.object(&task.object) else {
+                return Err(invalid(format!("{at}.object"), format!("unknown object {:?}", task.object)));
+            };
+            if task.grasp.offset.iter().chain(&task.motion).any(|v| !v.is_finite()) || !task.grasp.yaw.is_finite() {
+                return Err(invalid(format!("{at}.grasp"), "values must be finite".into()));
+            }
+            let needs_required = matches!(task.objective, Objective::Twist | Objective::Press);
+            match (needs_required, task.required) {
+                (true, None) => {
+                    return Err(invalid(format!("{at}.required"), format!("a {} task needs a required torque or force", task.objective.name())));
+                }
+                (true, Some(value)) if !(value.is_finite() && value != 0.0) => {
+                    return Err(invalid(format!("{at}.required"), "must be finite and non-zero".into()));
+                }
+                _ => {}
+            }
+            if task.objective == Objective::Twist && object.anchor.is_none() {
+                return Err(invalid(format!("{at}.objective"), format!("twist needs an anchored object, {} has no anchor", object.name)));
+            }
+            if task.objective != Objective::Twist && object.anchor.is_some() {
+                return Err(invalid(format!("{at}.objective"), format!("{} is anchored and only takes twist tasks", object.name)));
+            }
+        }
+        Ok(())
+    }
+}

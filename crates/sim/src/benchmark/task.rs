@@ -1,0 +1,34 @@
+//! A task of the benchmark: an object, an objective, a topology and where to grasp.
+
+use serde::{Deserialize, Serialize};
+
+use super::taxonomy::{Objective, Topology};
+
+/// Where the hand goes: its grasp point (see [`crate::hand::GRASP_POINT`]) at `offset` in the
+/// object frame, with the hand turned by `yaw` (radians) about the vertical from the object's
+/// heading. Orientation is not an action (DESIGN.md: the arm's IK is abstracted).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GraspLocation {
+    pub offset: [f32; 3],
+    #[serde(default)]
+    pub yaw: f32,
+}
+
+/// One of the benchmark's tasks.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Task {
+    pub id: String,
+    pub object: String,
+    pub objective: Objective,
+    pub topology: Topology,
+    pub grasp: GraspLocation,
+    /// The direction the hand moves once it holds the object, in the object frame (lift: up;
+    /// pull: up and towards the robot; twist: along the tangent of the turn).
+    pub motion: [f32; 3],
+    /// Twist: the torque to reach about the object's vertical axis (N m, sign gives the
+    /// direction). Press: the force to reach along the press direction, straight down (N).
+    #[serde(default)]
+    pub required: Option<f32>,
+}

@@ -1,0 +1,110 @@
+//! Typed configuration of the grasping world. Defaults cite the paper or DESIGN.md.
+
+use serde::{Deserialize, Serialize};
+
+/// Domain randomization (paper, section V-A: "random noise of +/-3 mm in object position,
+/// +/-11.5 deg in object orientation, and 0.02 rad in joint positions").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Randomization {
+    /// On by default; unit tests turn it off.
+    pub enabled: bool,
+    /// Object position noise, uniform in +/- this many metres on x and y. Default 0.003.
+    pub position: f32,
+    /// Object yaw noise, uniform in +/- this many radians. Default 11.5 deg = 0.2007 rad.
+    pub yaw: f32,
+    /// Finger joint offset noise, uniform in +/- this many radians. Default 0.02.
+    pub joint: f32,
+}
+
+impl Default for Randomization {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            position: 0.003,
+            yaw: 11.5f32.to_radians(),
+            joint: 0.02,
+        }
+    }
+}
+
+impl Randomization {
+    pub fn off() -> Self {
+        Self {
+            enabled: false,
+            ..Self::default()
+        }
+    }
+}
+
+/// Everything that sets the world's physics, timing and tests.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    /// Physics step (s). Default 1/240 s, PyBullet's default used by the paper's code.
+    pub physics_dt: f32,
+    /// Physics steps per control step; the action is held meanwhile. Default 8 (30 Hz control).
+    pub substeps: usize,
+    /// rapier solver iterations per physics step. Default 4.
+    pub solver_iterations: usize,
+    /// Episode time limit in control steps (truncation, not a CRM event). Default 600 (20 s).
+    pub max_episode_steps: usize,
+    /// Seconds in the grasp stage before `fail` fires. Default 12 s (room for the 5 s hold).
+    pub grasp_timeout_s: f32,
+    /// Seconds a lifted object must be held steadily for success (paper, section V-B-2: 5 s).
+    pub hold_s: f32,
+    /// Seconds a twist torque or press force must be kept above its requirement. Default 0.25.
+    pub sustain_s: f32,
+    /// Height (m) above its start at which an object counts as lifted. Default 0.05.
+    pub lift_height: f32,
+    /// A lifted object that falls back below this height (m) with no hand contact is dropped.
+    pub drop_height: f32,
+    /// Half side (m) of the arrive box around the grasp location (DESIGN.md: +/-1.5 cm).
+    pub arrive_tolerance: f32,
+    /// Horizontal displacement (m) of the object from its start that puts it out of reach.
+    pub workspace_radius: f32,
+    /// Fraction of the friction cone a sticking contact may use: `|F_t| <= (1 - margin) mu F_n`.
+    pub cone_margin: f32,
+    /// Control steps above the fragility limit before the grasp fails (crushed). Default 3.
+    pub crush_steps: usize,
+    /// Hand start, relative to the grasp location (m, world frame).
+    pub hand_start: [f32; 3],
+    pub randomization: Randomization,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            physics_dt: 1.0 / 240.0,
+            substeps: 8,
+            solver_iterations: 4,
+            max_episode_steps: 600,
+            grasp_timeout_s: 12.0,
+            hold_s: 5.0,
+            sustain_s: 0.25,
+            lift_height: 0.05,
+            drop_height: 0.02,
+            arrive_tolerance: 0.015,
+            workspace_radius: 0.15,
+            cone_margin: 0.05,
+            crush_steps: 3,
+            hand_start: [-0.10, 0.05, 0.15],
+            randomization: Randomization::default(),
+        }
+    }
+}
+
+impl SimConfig {
+    /// Simulated seconds per control step.
+    pub fn control_dt(&self) -> f32 {
+        self.physics_dt * self.substeps as f32
+    }
+
+    /// A configuration for unit tests: randomization off.
+    pub fn deterministic() -> Self {
+        Self {
+            randomization: Randomization::off(),
+            ..Self::default()
+        }
+    }
+}

@@ -1,0 +1,306 @@
+//! [`GraspEnv`]: the grasping world behind the [`crm::Environment`] trait.
+
+use std::sync::Arc;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rapier3d::prelude::*;
+
+use crate::benchmark::{Benchmark, Objective, Task};
+use crate::config::SimConfig;
+use crate::contacts::{ContactMetrics, object_contacts};
+use crate::error::{Error, Result};
+use crate::events::{FailCause, Judge, Snapshot};
+use crate::hand::{HAND_GROUP, max_flex};
+use crate::observation::{ACTIONS, MAX_FINGER_STEP, MAX_PALM_STEP, ObservationParts};
+use crate::scene::{self, Scene};
+
+/// Which task an episode runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TaskChoice {
+    /// Drawn uniformly from the benchmark with the episode's seed.
+    Random,
+    /// Always this task (index into the benchmark's tasks).
+    Fixed(usize),
+}
+
+/// The grasping environment: one world, rebuilt at every reset from the episode's seed.
+pub struct GraspEnv {
+    config: SimConfig,
+    benchmark: Arc<Benchmark>,
+    choice: TaskChoice,
+    task_index: usize,
+    scene: Option<Scene>,
+    judge: Option<Judge>,
+    stage: String,
+    steps: usize,
+    clipped: u64,
+    hand_contacts: ContactMetrics,
+    parts: ObservationParts,
+    last_fail: Option<FailCause>,
+    mount_target: Vec3,
+}
+
+impl GraspEnv {
+    pub fn new(benchmark: Arc<Benchmark>, config: SimConfig) -> Self {
+        Self {
+            config,
+            benchmark,
+            choice: TaskChoice::Random,
+            task_index: 0,
+            scene: None,
+            judge: None,
+            stage: String::new(),
+            steps: 0,
+            clipped: 0,
+            hand_contacts: ContactMetrics::default(),
+            parts: ObservationParts::default(),
+            last_fail: None,
+            mount_target: Vec3::ZERO,
+        }
+    }
+
+    /// Picks the task of the next resets.
+    pub fn set_task_choice(&mut self, choice: TaskChoice) -> Result<()> {
+        if let TaskChoice::Fixed(index) = choice {
+            if index >= self.benchmark.tasks.len() {
+                return Err(Error::UnknownTask(format!("#{index}")));
+            }
+        }
+        self.choice = choice;
+        Ok(())
+    }
+
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    pub fn benchmark(&self) -> &Benchmark {
+        &self.benchmark
+    }
+
+    /// The task of the current episode.
+    pub fn task(&self) -> &Task {
+        &self.benchmark.tasks[self.task_index]
+    }
+
+    pub fn task_index(&self) -> usize {
+        self.task_index
+    }
+
+    /// The built world of the current episode, if reset.
+    pub fn scene(&self) -> Option<&Scene> {
+        self.scene.as_ref()
+    }
+
+    /// Control steps taken in this episode.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// Action values clipped since this environment was made.
+    pub fn clipped_actions(&self) -> u64 {
+        self.clipped
+    }
+
+    /// The hand-object contacts of the last control step.
+    pub fn hand_contacts(&self) -> &ContactMetrics {
+        &self.hand_contacts
+    }
+
+    /// The parts of the last observation.
+    pub fn observation_parts(&self) -> &ObservationParts {
+        &self.parts
+    }
+
+    /// Why the last `fail` fired.
+    pub fn last_fail(&self) -> Option<FailCause> {
+        self.last_fail
+    }
+
+    /// The current grasp location: the object's pose composed with the task's offset.
+    pub fn grasp_location(&self) -> Option<Vec3> {
+        let scene = self.scene.as_ref()?;
+        let object = scene.world.bodies.get(scene.object)?;
+        Some(object.position().transform_point(Vec3::from(self.task().grasp.offset)))
+    }
+
+    /// Resets into a given task (index) with a seed.
+    pub fn reset_task(&mut self, task_index: usize, seed: u64) -> Result<Vec<f32>> {
+        if task_index >= self.benchmark.tasks.len() {
+            return Err(Error::UnknownTask(format!("#{task_index}")));
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        self.task_index = task_index;
+        let task = &self.benchmark.tasks[task_index];
+        let object = self.benchmark.object_of(task);
+        let scene = scene::build(task, object, &self.config, &mut rng);
+        let mut judge = Judge::new(task, object.fragility.grasp_force_limit(), object.anchor.is_some(), &self.config);
+        judge.set_stage(&self.stage);
+        self.mount_target = scene.mount_start;
+        self.scene = Some(scene);
+        self.judge = Some(judge);
+        self.steps = 0;
+        self.last_fail = None;
+        self.hand_contacts = ContactMetrics::default();
+        self.observe(&ContactMetrics::default(), 1)?;
+        Ok(self.parts.to_vec())
+    }
+
+    /// Resets with the task picked by the task choice.
+    pub fn reset_seeded(&mut self, seed: u64) -> Result<Vec<f32>> {
+        let task = match self.choice {
+            TaskChoice::Fixed(index) => index,
+            TaskChoice::Random => {
+                let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7a5c_0b5e_55ed_1234);
+                rng.random_range(0..self.benchmark.tasks.len())
+            }
+        };
+        self.reset_task(task, seed)
+    }
+
+    /// Checks an action: length and finiteness (naming the dimension).
+    pub fn check_action(action: &[f32]) -> Result<()> {
+        if action.len() != ACTIONS.len() {
+            return Err(Error::ActionLength {
+                expected: ACTIONS.len(),
+                got: action.len(),
+            });
+        }
+        if let Some((dimension, &value)) = action.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(Error::NonFiniteAction {
+                dimension,
+                name: ACTIONS[dimension],
+                value,
+            });
+        }
+        Ok(())
+    }
+
+    /// One control step with a union-space action (palm metres, finger radians); returns the
+    /// observation, the events that hold and whether the time limit was hit.
+    pub fn step_action(&mut self, action: &[f32]) -> Result<crm::EnvStep> {
+        Self::check_action(action)?;
+        let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
+        let mut clipped = 0u64;
+        let mut clip = |value: f32, limit: f32| {
+            let bounded = value.clamp(-limit, limit);
+            if bounded != value {
+                clipped += 1;
+            }
+            bounded
+        };
+        let delta = Vec3::new(clip(action[0], MAX_PALM_STEP), clip(action[1], MAX_PALM_STEP), clip(action[2], MAX_PALM_STEP));
+        let shape = self.benchmark.tasks[self.task_index].topology.shape();
+        for finger in 0..5 {
+            let step = clip(action[3 + finger], MAX_FINGER_STEP);
+            if shape[finger].active && step != 0.0 {
+                let command = (scene.hand.commands[finger] + step).clamp(shape[finger].preshape, max_flex(finger));
+                scene.hand.set_command(&mut scene.world, finger, command);
+            }
+        }
+        self.clipped += clipped;
+
+        let start = self.mount_target;
+        // Keep the arm above the table and near the workspace.
+        let target = (start + delta).clamp(Vec3::new(-0.4, -0.4, 0.02), Vec3::new(0.4, 0.4, 0.6));
+        self.mount_target = target;
+        let substeps = self.config.substeps.max(1);
+        let object = scene.object;
+        let mut averaged = ContactMetrics::default();
+        let mut last = ContactMetrics::default();
+        for k in 1..=substeps {
+            let alpha = k as f32 / substeps as f32;
+            scene.hand.move_mount(&mut scene.world, start.lerp(target, alpha));
+            scene.world.step();
+            last = object_contacts(&scene.world, object, |_, collider| {
+                collider.collision_groups().memberships.intersects(HAND_GROUP)
+            });
+            averaged.accumulate(&last);
+        }
+        averaged.scale(1.0 / substeps as f32);
+        last.force = averaged.force;
+        last.torque = averaged.torque;
+        last.grip = averaged.grip;
+        self.steps += 1;
+        let events = self.observe(&last, substeps)?;
+        self.hand_contacts = last;
+        Ok(crm::EnvStep {
+            observation: self.parts.to_vec(),
+            events,
+            truncated: self.steps >= self.config.max_episode_steps,
+        })
+    }
+
+    /// Computes the observation parts and the events from the world's current state.
+    fn observe(&mut self, contacts: &ContactMetrics, _substeps: usize) -> Result<Vec<&'static str>> {
+        let scene = self.scene.as_ref().ok_or(Error::NotReset)?;
+        let task = &self.benchmark.tasks[self.task_index];
+        let object = self.benchmark.object_of(task);
+        let body = scene.world.bodies.get(scene.object).ok_or(Error::NotReset)?;
+        let pose = *body.position();
+        if !pose.translation.is_finite() {
+            return Err(Error::Diverged(format!("object position {:?}", pose.translation)));
+        }
+        let grasp_location = pose.transform_point(Vec3::from(task.grasp.offset));
+        let grasp_point = scene.hand.grasp_point(&scene.world);
+        let relative = grasp_location - grasp_point;
+        let displacement = pose.translation - scene.object_start.translation;
+        let up = pose.rotation * Vec3::Z;
+        let limit = object.fragility.grasp_force_limit();
+        let twist_torque = contacts.torque_about(scene.object_start.translation, scene.object_start.rotation * Vec3::Z);
+        let snapshot = Snapshot {
+            arrive_error: (grasp_point - grasp_location).to_array(),
+            displacement: displacement.to_array(),
+            speed: body.linvel().length(),
+            tilt: up.dot(Vec3::Z).clamp(-1.0, 1.0).acos(),
+            contacts: contacts.count(),
+            grip: contacts.grip,
+            twist_torque,
+            press_force: -contacts.force.z,
+        };
+        let judge = self.judge.as_mut().ok_or(Error::NotReset)?;
+        let (events, cause) = judge.judge(&snapshot);
+        if cause.is_some() {
+            self.last_fail = cause;
+        }
+        self.parts = ObservationParts {
+            n_c: contacts.count(),
+            dist: relative.length(),
+            object: displacement.to_array(),
+            cone: contacts.in_cone(self.config.cone_margin),
+            relative: relative.to_array(),
+            in_hand: (body.center_of_mass() - grasp_point).to_array(),
+            force: contacts.force.to_array(),
+            torque: contacts.torque.to_array(),
+            commands: scene.hand.commands,
+            grip: contacts.grip / limit,
+            progress: judge.progress(),
+            objective: Some(task.objective),
+            topology: Some(task.topology),
+        };
+        Ok(events)
+    }
+
+    /// The objective of the current episode.
+    pub fn objective(&self) -> Objective {
+        self.task().objective
+    }
+}
+
+impl crm::Environment for GraspEnv {
+    fn reset(&mut self, seed: u64) -> std::result::Result<Vec<f32>, String> {
+        self.reset_seeded(seed).map_err(|e| e.to_string())
+    }
+
+    fn set_stage(&mut self, stage: &str) {
+        self.stage = stage.to_string();
+        if let Some(judge) = self.judge.as_mut() {
+            judge.set_stage(stage);
+        }
+    }
+
+    fn step(&mut self, action: &[f32]) -> std::result::Result<crm::EnvStep, String> {
+        self.step_action(action).map_err(|e| e.to_string())
+    }
+}

@@ -1,0 +1,62 @@
+//! The crate's error type.
+
+/// Everything that can go wrong while loading the benchmark or stepping the world.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A data file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A data file is not valid JSON for its type.
+    #[error("malformed {path} at line {line}, column {column}: {message}")]
+    Parse {
+        path: String,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    /// A data file parsed but a value is out of its domain; `at` locates it in the file.
+    #[error("invalid {path} at {at}: {message}")]
+    Invalid {
+        path: String,
+        at: String,
+        message: String,
+    },
+    /// An action of the wrong length.
+    #[error("action has {got} values, expected {expected}")]
+    ActionLength { expected: usize, got: usize },
+    /// A non-finite action value, naming its dimension.
+    #[error("action dimension {dimension} ({name}) is not finite: {value}")]
+    NonFiniteAction {
+        dimension: usize,
+        name: &'static str,
+        value: f32,
+    },
+    /// A task id that is not in the benchmark.
+    #[error("unknown task {0:?}")]
+    UnknownTask(String),
+    /// The machine spec does not fit this environment.
+    #[error("crm spec: {0}")]
+    Crm(#[from] crm::Error),
+    /// `step` before `reset`.
+    #[error("the environment was stepped before reset")]
+    NotReset,
+    /// The physics produced a non-finite state (a diverged simulation).
+    #[error("the simulation diverged: {0}")]
+    Diverged(String),
+}
+
+/// The crate's result alias.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, path: &str) -> Result<T> {
+    serde_json::from_str(text).map_err(|err| Error::Parse {
+        path: path.to_string(),
+        line: err.line(),
+        column: err.column(),
+        message: err.to_string(),
+    })
+}

@@ -1,0 +1,160 @@
+//! The events `arrive, aor, gor, fail, succ` and the per-objective success tests (paper,
+//! sections IV-A and V-B-2).
+
+use crate::benchmark::{Objective, Task};
+use crate::config::SimConfig;
+
+/// What the judge looks at after a control step.
+#[derive(Clone, Debug, Default)]
+pub struct Snapshot {
+    /// Grasp point minus grasp location, per axis (m).
+    pub arrive_error: [f32; 3],
+    /// Object displacement from its start (m).
+    pub displacement: [f32; 3],
+    /// Object linear speed (m/s).
+    pub speed: f32,
+    /// Angle between the object's up axis and the world's (rad).
+    pub tilt: f32,
+    pub contacts: usize,
+    /// Summed normal force from the hand (N).
+    pub grip: f32,
+    /// Torque of the hand's contacts about the object's twist axis (N m).
+    pub twist_torque: f32,
+    /// Hand force on the object along the press direction, straight down (N).
+    pub press_force: f32,
+}
+
+/// Tracks timers across control steps and decides which events hold.
+#[derive(Clone, Debug)]
+pub struct Judge {
+    objective: Objective,
+    required: f32,
+    force_limit: f32,
+    anchored: bool,
+    control_dt: f32,
+    hold_s: f32,
+    sustain_s: f32,
+    lift_height: f32,
+    drop_height: f32,
+    arrive_tolerance: f32,
+    workspace_radius: f32,
+    grasp_timeout_s: f32,
+    crush_steps: usize,
+    in_grasp: bool,
+    grasp_steps: usize,
+    held_steps: usize,
+    sustained_steps: usize,
+    over_limit_steps: usize,
+    lifted_once: bool,
+    progress: f32,
+}
+
+/// Why a `fail` fired (for logs and the oracle's report).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FailCause {
+    Timeout,
+    Dropped,
+    Crushed,
+}
+
+impl Judge {
+    pub fn new(task: &Task, force_limit: f32, anchored: bool, config: &SimConfig) -> Self {
+        Self {
+            objective: task.objective,
+            required: task.required.unwrap_or(0.0),
+            force_limit,
+            anchored,
+            control_dt: config.control_dt(),
+            hold_s: config.hold_s,
+            sustain_s: config.sustain_s,
+            lift_height: config.lift_height,
+            drop_height: config.drop_height,
+            arrive_tolerance: config.arrive_tolerance,
+            workspace_radius: config.workspace_radius,
+            grasp_timeout_s: config.grasp_timeout_s,
+            crush_steps: config.crush_steps,
+            in_grasp: false,
+            grasp_steps: 0,
+            held_steps: 0,
+            sustained_steps: 0,
+            over_limit_steps: 0,
+            lifted_once: false,
+            progress: 0.0,
+        }
+    }
+
+    /// The machine entered a stage; grasp-stage timers run only in `grasp`.
+    pub fn set_stage(&mut self, stage: &str) {
+        self.in_grasp = stage == "grasp";
+    }
+
+    /// Progress of the success test in `[0, 1]`.
+    pub fn progress(&self) -> f32 {
+        self.progress
+    }
+
+    fn seconds(&self, steps: usize) -> f32 {
+        steps as f32 * self.control_dt
+    }
+
+    /// The events that hold after this control step and, for `fail`, why.
+    pub fn judge(&mut self, s: &Snapshot) -> (Vec<&'static str>, Option<FailCause>) {
+        let mut events = Vec::new();
+        if s.arrive_error.iter().all(|e| e.abs() <= self.arrive_tolerance) {
+            events.push("arrive");
+        }
+        let horizontal = (s.displacement[0].powi(2) + s.displacement[1].powi(2)).sqrt();
+        let knocked_over = !self.anchored && s.contacts == 0 && s.tilt > 60f32.to_radians();
+        if horizontal > self.workspace_radius || s.displacement[2] < -0.05 || knocked_over {
+            // The object left the workspace; the machine takes `aor` from approach, `gor` from grasp.
+            events.push("aor");
+            events.push("gor");
+        }
+
+        if s.grip > self.force_limit {
+            self.over_limit_steps += 1;
+        } else {
+            self.over_limit_steps = 0;
+        }
+        let lifted = s.displacement[2] >= self.lift_height;
+        self.lifted_once |= lifted;
+
+        let done = if self.objective.is_hold() {
+            let steady = lifted && s.contacts >= 2 && s.speed < 0.3;
+            self.held_steps = if steady { self.held_steps + 1 } else { 0 };
+            let lift_part = (s.displacement[2] / self.lift_height).clamp(0.0, 1.0);
+            let hold_part = (self.seconds(self.held_steps) / self.hold_s).clamp(0.0, 1.0);
+            self.progress = 0.5 * lift_part + 0.5 * hold_part;
+            self.seconds(self.held_steps) >= self.hold_s - 1e-6
+        } else {
+            let measure = match self.objective {
+                Objective::Twist => s.twist_torque * self.required.signum(),
+                _ => s.press_force,
+            };
+            let target = self.required.abs();
+            self.sustained_steps = if measure >= target { self.sustained_steps + 1 } else { 0 };
+            self.progress = (measure / target).clamp(0.0, 1.0);
+            self.seconds(self.sustained_steps) >= self.sustain_s - 1e-6
+        };
+
+        let mut cause = None;
+        if self.in_grasp {
+            self.grasp_steps += 1;
+            if self.over_limit_steps >= self.crush_steps {
+                cause = Some(FailCause::Crushed);
+            } else if self.lifted_once && s.displacement[2] < self.drop_height && s.contacts == 0 {
+                cause = Some(FailCause::Dropped);
+            } else if self.seconds(self.grasp_steps) > self.grasp_timeout_s {
+                cause = Some(FailCause::Timeout);
+            }
+            // A crushed object fails even if the test passed in the same step.
+            if done && cause != Some(FailCause::Crushed) {
+                events.push("succ");
+            }
+            if cause.is_some() {
+                events.push("fail");
+            }
+        }
+        (events, cause)
+    }
+}

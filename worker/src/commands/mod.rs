@@ -1,0 +1,51 @@
+//! One module per subcommand.
+
+pub mod bench;
+pub mod oracle;
+pub mod tasks;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::Context;
+use grasp_sim::{Benchmark, SimConfig};
+
+/// Options every environment-running command shares.
+#[derive(clap::Args, Clone, Debug)]
+pub struct EnvArgs {
+    /// A benchmark file to use instead of the built-in one.
+    #[arg(long, value_name = "FILE")]
+    pub benchmark: Option<PathBuf>,
+    /// A CRM spec file to use instead of the built-in grasping spec.
+    #[arg(long, value_name = "FILE")]
+    pub spec: Option<PathBuf>,
+    /// Turn domain randomization off (it is on by default, as in the paper).
+    #[arg(long)]
+    pub no_randomization: bool,
+}
+
+impl EnvArgs {
+    pub fn benchmark(&self) -> anyhow::Result<Arc<Benchmark>> {
+        Ok(Arc::new(match &self.benchmark {
+            Some(path) => Benchmark::load(path).context("loading the benchmark")?,
+            None => Benchmark::builtin(),
+        }))
+    }
+
+    pub fn machine(&self) -> anyhow::Result<crm::Machine> {
+        let spec = match &self.spec {
+            Some(path) => crm::Spec::load(path).context("loading the crm spec")?,
+            None => grasp_sim::spec::grasping_spec(),
+        };
+        grasp_sim::spec::check_compatible(&spec)?;
+        Ok(crm::Machine::from_spec(spec)?)
+    }
+
+    pub fn config(&self) -> SimConfig {
+        if self.no_randomization {
+            SimConfig::deterministic()
+        } else {
+            SimConfig::default()
+        }
+    }
+}
