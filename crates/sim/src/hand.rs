@@ -29,8 +29,10 @@ pub fn max_flex(finger: usize) -> f32 {
 
 /// The point of the hand that goes to the grasp location, in the hand frame: the centre of
 /// the space the fingers close around.
-pub const GRASP_POINT: [f32; 3] = [0.0, 0.0, -0.04];
+pub const GRASP_POINT: [f32; 3] = [0.0, THUMB_Y, -0.04];
 
+/// The thumb sits across from the index and middle fingers, as a human thumb opposes them.
+const THUMB_Y: f32 = 0.02;
 const PALM_HALF: [f32; 3] = [0.045, 0.042, 0.012];
 const PALM_MASS: f32 = 0.4;
 const HAND_FRICTION: f32 = 1.0;
@@ -88,7 +90,7 @@ fn chains() -> [ChainSpec; 5] {
         ChainSpec {
             // Opposite the fingers at the proximal edge, pointing back; it flexes down and
             // forward, so an open hand is flat and clears low objects.
-            base: [-PALM_HALF[0], 0.0, -0.004],
+            base: [-PALM_HALF[0], THUMB_Y, -0.004],
             base_pitch: std::f32::consts::PI,
             axis_sign: -1.0,
             links: vec![link(0.05, 0.0095, 0.04, 1.0), link(0.04, 0.009, 0.02, 0.5)],

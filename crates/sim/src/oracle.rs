@@ -12,6 +12,8 @@ const APPROACH_SCALE: f32 = 0.01;
 const GRASP_SCALE: f32 = 0.003;
 /// Height (m) above the grasp location at which the hand travels before descending.
 const CLEARANCE: f32 = 0.06;
+/// Fraction of the grasp step used to move a held object (slower swings less).
+const LIFT_SPEED: f32 = 0.6;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Phase {
@@ -99,7 +101,16 @@ impl Oracle {
                     if parts.commands[finger] < shape[finger].closed - 1e-3 {
                         all_closed = false;
                     }
-                    action[3 + finger] = if grip < wanted_grip { 0.5 } else { 0.0 };
+                    // Close fast until the first touch, then slowly so the grip does not
+                    // overshoot.
+                    let rate = 1.0;
+                    action[3 + finger] = if grip >= wanted_grip {
+                        0.0
+                    } else if parts.n_c == 0 {
+                        rate
+                    } else {
+                        0.3 * rate
+                    };
                 }
                 if grip >= wanted_grip || all_closed {
                     self.settled += 1;
@@ -149,9 +160,9 @@ impl Oracle {
                     _ => {
                         if self.travelled < 0.08 {
                             for axis in 0..3 {
-                                action[axis] = motion[axis];
+                                action[axis] = LIFT_SPEED * motion[axis];
                             }
-                            self.travelled += GRASP_SCALE;
+                            self.travelled += LIFT_SPEED * GRASP_SCALE;
                         }
                     }
                 }

@@ -132,7 +132,8 @@ impl Topology {
             Topology::PoPmAb25 | Topology::PPdAb25 => [thumb, closing, closing, closing, closing],
             Topology::PPdAb2 => [thumb, closing, IDLE, IDLE, IDLE],
             Topology::PPdAb23 => [thumb, closing, closing, IDLE, IDLE],
-            Topology::InSiAd2 => [thumb, finger(true, 0.8, 1.6), IDLE, IDLE, IDLE],
+            // The side of the curled index against a partly closed thumb.
+            Topology::InSiAd2 => [finger(true, 0.0, 1.4), closing, IDLE, IDLE, IDLE],
         }
     }
 }
