@@ -1,4 +1,15 @@
-//! `crm bench`: figures from the real environment.
+//! `crm bench`: figures from the real environment (speed targets live here, not in tests).
+
+use std::time::Instant;
+
+use grasp_sim::observation::ACTIONS;
+use grasp_sim::{GraspEnv, SimConfig};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::EnvArgs;
 
 #[derive(clap::Subcommand, Debug)]
 pub enum BenchCommand {
@@ -8,12 +19,126 @@ pub enum BenchCommand {
 
 #[derive(clap::Args, Debug)]
 pub struct EnvBenchArgs {
+    #[command(flatten)]
+    pub env: EnvArgs,
+    /// Control steps to time on one core.
+    #[arg(long, default_value_t = 6000)]
+    pub steps: usize,
+    /// Environments whose memory is measured together.
+    #[arg(long, default_value_t = 64)]
+    pub memory_envs: usize,
+    /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
 }
 
+#[derive(Serialize)]
+struct EnvReport {
+    control_steps_per_sec_one_core: f64,
+    control_steps_per_sec_all_cores: f64,
+    cores: usize,
+    physics_steps_per_control_step: usize,
+    physics_dt: f32,
+    real_time_factor_one_core: f64,
+    real_time_factor_all_cores: f64,
+    peak_rss_bytes_per_env: f64,
+    steps_timed_one_core: usize,
+    episodes_one_core: usize,
+}
+
 pub fn run(command: BenchCommand) -> anyhow::Result<()> {
     match command {
-        BenchCommand::Env(_) => anyhow::bail!("not yet"),
+        BenchCommand::Env(args) => env(args),
     }
+}
+
+/// A random action in the union space, in environment units (metres, radians): the grasping
+/// spec's scales, so the hand moves as a policy would move it.
+fn random_action(rng: &mut ChaCha8Rng) -> Vec<f32> {
+    let mut action: Vec<f32> = (0..ACTIONS.len()).map(|_| rng.random_range(-1.0f32..=1.0)).collect();
+    for value in &mut action[..3] {
+        *value *= 0.01;
+    }
+    for value in &mut action[3..] {
+        *value = 0.1 * (*value + 0.3);
+    }
+    action
+}
+
+/// Steps one environment through `steps` control steps of random actions over random tasks,
+/// resetting when an episode ends (episodes end at the time limit or when the object leaves).
+fn drive(env: &mut GraspEnv, steps: usize, seed: u64) -> anyhow::Result<usize> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut episodes = 1;
+    env.reset_seeded(seed)?;
+    let horizon = 150;
+    for k in 0..steps {
+        let step = env.step_action(&random_action(&mut rng))?;
+        if step.truncated || env.steps() >= horizon {
+            env.reset_seeded(seed.wrapping_add(k as u64 + 1))?;
+            episodes += 1;
+        }
+    }
+    Ok(episodes)
+}
+
+fn rss_bytes() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024.0)
+}
+
+fn env(args: EnvBenchArgs) -> anyhow::Result<()> {
+    let benchmark = args.env.benchmark()?;
+    let config: SimConfig = args.env.config();
+
+    let mut one = GraspEnv::new(benchmark.clone(), config.clone());
+    drive(&mut one, 200, 99)?; // warm up caches and allocations
+    let start = Instant::now();
+    let episodes = drive(&mut one, args.steps, 1)?;
+    let one_core = args.steps as f64 / start.elapsed().as_secs_f64();
+
+    let cores = rayon::current_num_threads();
+    let per_env = (args.steps / cores.max(1)).max(200);
+    let start = Instant::now();
+    (0..cores)
+        .into_par_iter()
+        .map(|k| {
+            let mut env = GraspEnv::new(benchmark.clone(), config.clone());
+            drive(&mut env, per_env, 1000 + k as u64)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let all_cores = (per_env * cores) as f64 / start.elapsed().as_secs_f64();
+
+    let before = rss_bytes().unwrap_or(0.0);
+    let mut envs = Vec::with_capacity(args.memory_envs);
+    for k in 0..args.memory_envs {
+        let mut env = GraspEnv::new(benchmark.clone(), config.clone());
+        drive(&mut env, 30, 5000 + k as u64)?;
+        envs.push(env);
+    }
+    let after = rss_bytes().unwrap_or(0.0);
+    let per_env_bytes = (after - before).max(0.0) / args.memory_envs.max(1) as f64;
+    drop(envs);
+
+    let control_dt = f64::from(config.control_dt());
+    let report = EnvReport {
+        control_steps_per_sec_one_core: one_core,
+        control_steps_per_sec_all_cores: all_cores,
+        cores,
+        physics_steps_per_control_step: config.substeps,
+        physics_dt: config.physics_dt,
+        real_time_factor_one_core: one_core * control_dt,
+        real_time_factor_all_cores: all_cores * control_dt,
+        peak_rss_bytes_per_env: per_env_bytes,
+        steps_timed_one_core: args.steps,
+        episodes_one_core: episodes,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    }
+    Ok(())
 }
