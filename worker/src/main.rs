@@ -5,7 +5,11 @@ mod commands;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "crm", version, about = "Task-oriented dexterous grasping with a Contextual Reward Machine")]
+#[command(
+    name = "crm",
+    version,
+    about = "Task-oriented dexterous grasping with a Contextual Reward Machine"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -30,7 +34,9 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Up(args) => {
-            eprintln!("crm up: the training service is not built yet; running the scripted oracle over the benchmark");
+            eprintln!(
+                "crm up: the training service is not built yet; running the scripted oracle over the benchmark"
+            );
             commands::oracle::run(args)
         }
         Command::Oracle(args) => commands::oracle::run(args),

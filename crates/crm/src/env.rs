@@ -103,26 +103,38 @@ impl<E: Environment> CrmEnv<E> {
     pub fn step(&mut self, action: &[f32]) -> Result<CrmStep> {
         let stage = self.episode.stage();
         if self.machine.is_terminal(stage) {
-            return Err(Error::EpisodeOver(self.machine.stage_name(stage).to_string()));
+            return Err(Error::EpisodeOver(
+                self.machine.stage_name(stage).to_string(),
+            ));
         }
         let (union_action, clipped) = self.machine.expand_action(stage, action)?;
         let env_step = self.env.step(&union_action).map_err(Error::Env)?;
         let fired = env_step
             .events
             .iter()
-            .map(|name| self.machine.event_id(name).ok_or_else(|| Error::UnknownEvent((*name).to_string())))
+            .map(|name| {
+                self.machine
+                    .event_id(name)
+                    .ok_or_else(|| Error::UnknownEvent((*name).to_string()))
+            })
             .collect::<Result<Vec<_>>>()?;
-        let outcome = self.episode.advance(&self.machine, &env_step.observation, &fired)?;
+        let outcome = self
+            .episode
+            .advance(&self.machine, &env_step.observation, &fired)?;
         if outcome.next != stage {
             self.env.set_stage(self.machine.stage_name(outcome.next));
         }
-        let (intra_reward, transition_reward) = self.mode.apply(outcome.intra_reward, outcome.transition_reward);
+        let (intra_reward, transition_reward) = self
+            .mode
+            .apply(outcome.intra_reward, outcome.transition_reward);
         Ok(CrmStep {
             stage: outcome.next,
             abstract_state: outcome.abstract_state,
             intra_reward,
             transition_reward,
-            event: outcome.event.map(|e| self.machine.event_name(e).to_string()),
+            event: outcome
+                .event
+                .map(|e| self.machine.event_name(e).to_string()),
             done: outcome.done,
             truncated: env_step.truncated && !outcome.done,
             clipped,

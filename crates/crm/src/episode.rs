@@ -66,7 +66,12 @@ impl Episode {
     }
 
     /// Steps the machine and records the edge taken, if any.
-    pub fn advance(&mut self, machine: &Machine, observation: &[f32], fired: &[usize]) -> Result<StepOutcome> {
+    pub fn advance(
+        &mut self,
+        machine: &Machine,
+        observation: &[f32],
+        fired: &[usize],
+    ) -> Result<StepOutcome> {
         let outcome = machine.step(self.stage, observation, fired)?;
         self.intra_return += f64::from(outcome.intra_reward);
         if let Some(event) = outcome.event {

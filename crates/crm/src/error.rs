@@ -27,7 +27,9 @@ pub enum Error {
     #[error("observation has {got} values, the spec's features need {expected}")]
     ObservationLength { expected: usize, got: usize },
     /// A policy action of the wrong length for its stage.
-    #[error("action for stage {stage} has {got} values, the stage has {expected} action dimensions")]
+    #[error(
+        "action for stage {stage} has {got} values, the stage has {expected} action dimensions"
+    )]
     ActionLength {
         stage: String,
         expected: usize,

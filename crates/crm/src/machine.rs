@@ -66,7 +66,10 @@ fn check_unique(names: &[String], what: &str) -> Result<()> {
             return Err(invalid(format!("{what}[{i}]"), "empty name"));
         }
         if !seen.insert(name.as_str()) {
-            return Err(invalid(format!("{what}[{i}]"), format!("duplicate name {name:?}")));
+            return Err(invalid(
+                format!("{what}[{i}]"),
+                format!("duplicate name {name:?}"),
+            ));
         }
     }
     Ok(())
@@ -85,7 +88,10 @@ fn compile_term(term: &RewardTerm, features: &[String], at: &str) -> Result<Comp
         }
     };
     Ok(match term {
-        RewardTerm::Linear { feature: name, coef } => CompiledTerm::Linear {
+        RewardTerm::Linear {
+            feature: name,
+            coef,
+        } => CompiledTerm::Linear {
             index: feature(name)?,
             coef: finite(*coef, "coef")?,
         },
@@ -132,13 +138,22 @@ impl Machine {
             let mut seen_dims = BTreeSet::new();
             for (k, action) in stage.actions.iter().enumerate() {
                 let dim = index_of(&spec.action_dims, &action.dim).ok_or_else(|| {
-                    invalid(format!("{at}.actions[{k}]"), format!("unknown action dimension {:?}", action.dim))
+                    invalid(
+                        format!("{at}.actions[{k}]"),
+                        format!("unknown action dimension {:?}", action.dim),
+                    )
                 })?;
                 if !seen_dims.insert(dim) {
-                    return Err(invalid(format!("{at}.actions[{k}]"), format!("duplicate action dimension {:?}", action.dim)));
+                    return Err(invalid(
+                        format!("{at}.actions[{k}]"),
+                        format!("duplicate action dimension {:?}", action.dim),
+                    ));
                 }
                 if !(action.scale.is_finite() && action.scale > 0.0) {
-                    return Err(invalid(format!("{at}.actions[{k}].scale"), "must be finite and positive"));
+                    return Err(invalid(
+                        format!("{at}.actions[{k}].scale"),
+                        "must be finite and positive",
+                    ));
                 }
                 actions.push((dim, action.scale));
             }
@@ -148,7 +163,10 @@ impl Machine {
                 .enumerate()
                 .map(|(k, name)| {
                     index_of(&spec.features, name).ok_or_else(|| {
-                        invalid(format!("{at}.abstraction[{k}]"), format!("unknown feature {name:?}"))
+                        invalid(
+                            format!("{at}.abstraction[{k}]"),
+                            format!("unknown feature {name:?}"),
+                        )
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;
@@ -170,7 +188,10 @@ impl Machine {
         let initial = index_of(&stage_names, &spec.initial)
             .ok_or_else(|| invalid("initial", format!("unknown stage {:?}", spec.initial)))?;
         if stages[initial].terminal {
-            return Err(invalid("initial", format!("stage {:?} is terminal", spec.initial)));
+            return Err(invalid(
+                "initial",
+                format!("stage {:?} is terminal", spec.initial),
+            ));
         }
 
         let mut edges: Vec<Vec<Option<Edge>>> = vec![vec![None; spec.events.len()]; stages.len()];
@@ -183,7 +204,10 @@ impl Machine {
             let event = index_of(&spec.events, &edge.event)
                 .ok_or_else(|| invalid(&at, format!("unknown event {:?}", edge.event)))?;
             if stages[from].terminal {
-                return Err(invalid(&at, format!("edge out of terminal stage {:?}", edge.from)));
+                return Err(invalid(
+                    &at,
+                    format!("edge out of terminal stage {:?}", edge.from),
+                ));
             }
             if from == to {
                 return Err(invalid(&at, format!("self-loop on stage {:?}", edge.from)));
@@ -192,7 +216,13 @@ impl Machine {
                 return Err(invalid(format!("{at}.reward"), "must be finite"));
             }
             if edges[from][event].is_some() {
-                return Err(invalid(&at, format!("second edge for stage {:?} and event {:?}", edge.from, edge.event)));
+                return Err(invalid(
+                    &at,
+                    format!(
+                        "second edge for stage {:?} and event {:?}",
+                        edge.from, edge.event
+                    ),
+                ));
             }
             let bonus = edge
                 .bonus
@@ -200,7 +230,10 @@ impl Machine {
                 .enumerate()
                 .map(|(k, b)| {
                     let index = index_of(&spec.features, &b.feature).ok_or_else(|| {
-                        invalid(format!("{at}.bonus[{k}]"), format!("unknown feature {:?}", b.feature))
+                        invalid(
+                            format!("{at}.bonus[{k}]"),
+                            format!("unknown feature {:?}", b.feature),
+                        )
                     })?;
                     if !b.reward.is_finite() {
                         return Err(invalid(format!("{at}.bonus[{k}].reward"), "must be finite"));
@@ -221,10 +254,19 @@ impl Machine {
         }
         for (id, stage) in stages.iter().enumerate() {
             if stage.terminal && !reachable.contains(&id) {
-                return Err(invalid("stages", format!("terminal stage {:?} is unreachable from {:?}", stage.name, spec.initial)));
+                return Err(invalid(
+                    "stages",
+                    format!(
+                        "terminal stage {:?} is unreachable from {:?}",
+                        stage.name, spec.initial
+                    ),
+                ));
             }
             if !stage.terminal && edges[id].iter().all(Option::is_none) {
-                return Err(invalid("transitions", format!("non-terminal stage {:?} has no edge out", stage.name)));
+                return Err(invalid(
+                    "transitions",
+                    format!("non-terminal stage {:?} has no edge out", stage.name),
+                ));
             }
         }
 
@@ -296,13 +338,21 @@ impl Machine {
 
     /// Size of the largest abstract state, for fixed-width networks.
     pub fn max_abstract_len(&self) -> usize {
-        self.stages.iter().map(|s| s.abstraction.len()).max().unwrap_or(0)
+        self.stages
+            .iter()
+            .map(|s| s.abstraction.len())
+            .max()
+            .unwrap_or(0)
     }
 
     /// `phi_i(u)`.
     pub fn abstract_state(&self, stage: StageId, observation: &[f32]) -> Result<Vec<f32>> {
         self.check_observation(observation)?;
-        Ok(self.stages[stage].abstraction.iter().map(|&i| observation[i]).collect())
+        Ok(self.stages[stage]
+            .abstraction
+            .iter()
+            .map(|&i| observation[i])
+            .collect())
     }
 
     /// Turns a stage action in `[-1, 1]^{|A_i|}` (or a full union-space vector with masked
@@ -352,7 +402,12 @@ impl Machine {
     /// One step of `delta` from `stage`, given the next global observation `u_{t+1}` and the
     /// events that fired (indices into the spec's events, any order). Takes at most one edge:
     /// the first fired event, in the spec's priority order, with an edge out of `stage`.
-    pub fn step(&self, stage: StageId, observation: &[f32], fired: &[usize]) -> Result<StepOutcome> {
+    pub fn step(
+        &self,
+        stage: StageId,
+        observation: &[f32],
+        fired: &[usize],
+    ) -> Result<StepOutcome> {
         self.check_observation(observation)?;
         if self.stages[stage].terminal {
             return Err(Error::EpisodeOver(self.stages[stage].name.clone()));
@@ -384,7 +439,11 @@ impl Machine {
             from: stage,
             next,
             event,
-            abstract_state: self.stages[next].abstraction.iter().map(|&i| observation[i]).collect(),
+            abstract_state: self.stages[next]
+                .abstraction
+                .iter()
+                .map(|&i| observation[i])
+                .collect(),
             intra_reward,
             transition_reward,
             done: self.stages[next].terminal,
@@ -398,7 +457,11 @@ impl Machine {
 
     /// The best intra-stage reward a stage can give per step (an upper bound).
     pub fn best_intra_reward(&self, stage: StageId) -> f32 {
-        self.stages[stage].reward.iter().map(CompiledTerm::upper_bound).sum()
+        self.stages[stage]
+            .reward
+            .iter()
+            .map(CompiledTerm::upper_bound)
+            .sum()
     }
 
     /// Edges as `(from, event, to)` names, sorted, for listings.
@@ -408,7 +471,10 @@ impl Machine {
             for (event, edge) in row.iter().enumerate() {
                 if let Some(edge) = edge {
                     out.insert(
-                        (self.stages[from].name.clone(), self.spec.events[event].clone()),
+                        (
+                            self.stages[from].name.clone(),
+                            self.spec.events[event].clone(),
+                        ),
                         self.stages[edge.to].name.clone(),
                     );
                 }

@@ -38,14 +38,19 @@ fn default_cap() -> f32 {
 /// A term with its feature names resolved to observation indices.
 #[derive(Clone, Debug)]
 pub(crate) enum CompiledTerm {
-    Linear { index: usize, coef: f32 },
+    Linear {
+        index: usize,
+        coef: f32,
+    },
     NegExpNorm {
         indices: Vec<usize>,
         coef: f32,
         scale: f32,
         cap: f32,
     },
-    Constant { value: f32 },
+    Constant {
+        value: f32,
+    },
 }
 
 impl CompiledTerm {

@@ -74,7 +74,9 @@ fn first_event_in_priority_order_wins() {
     // Both arrive and oor fire: arrive comes first in the spec's event list.
     let arrive = machine.event_id("arrive").unwrap();
     let oor = machine.event_id("oor").unwrap();
-    let outcome = machine.step(approach, &[0.0, 0.0, 0.0], &[oor, arrive]).unwrap();
+    let outcome = machine
+        .step(approach, &[0.0, 0.0, 0.0], &[oor, arrive])
+        .unwrap();
     assert_eq!(machine.stage_name(outcome.next), "grasp");
     assert_eq!(outcome.transition_reward, 10.0);
     // The abstract state is the next stage's: grasp sees three features.
@@ -87,7 +89,9 @@ fn first_event_in_priority_order_wins() {
 fn an_event_without_edge_keeps_the_stage() {
     let machine = toy_machine();
     let succ = machine.event_id("succ").unwrap();
-    let outcome = machine.step(machine.initial(), &[0.5, 1.0, 0.0], &[succ]).unwrap();
+    let outcome = machine
+        .step(machine.initial(), &[0.5, 1.0, 0.0], &[succ])
+        .unwrap();
     assert_eq!(outcome.next, machine.initial());
     assert_eq!(outcome.transition_reward, 0.0);
     assert!(!outcome.done);
@@ -116,8 +120,13 @@ fn actions_are_masked_scaled_clipped_and_checked() {
     // A full union-space vector: the masked grip value is ignored.
     let (action, clipped) = machine.expand_action(approach, &[0.5, f32::NAN]).unwrap();
     assert_eq!((action, clipped), (vec![0.005, 0.0], 0));
-    let err = machine.expand_action(grasp, &[0.0, f32::INFINITY]).unwrap_err();
-    assert!(err.to_string().contains("action dimension 1 (grip)"), "{err}");
+    let err = machine
+        .expand_action(grasp, &[0.0, f32::INFINITY])
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("action dimension 1 (grip)"),
+        "{err}"
+    );
     let err = machine.expand_action(grasp, &[0.0, 0.0, 0.0]).unwrap_err();
     assert!(matches!(err, crm::Error::ActionLength { .. }), "{err}");
 }

@@ -77,7 +77,10 @@ pub fn object_contacts(
     };
     let com = body.center_of_mass();
     for pair in world.narrow_phase.contact_pairs() {
-        let (Some(c1), Some(c2)) = (world.colliders.get(pair.collider1), world.colliders.get(pair.collider2)) else {
+        let (Some(c1), Some(c2)) = (
+            world.colliders.get(pair.collider1),
+            world.colliders.get(pair.collider2),
+        ) else {
             continue;
         };
         let object_first = c1.parent() == Some(object);

@@ -62,10 +62,10 @@ impl GraspEnv {
 
     /// Picks the task of the next resets.
     pub fn set_task_choice(&mut self, choice: TaskChoice) -> Result<()> {
-        if let TaskChoice::Fixed(index) = choice {
-            if index >= self.benchmark.tasks.len() {
-                return Err(Error::UnknownTask(format!("#{index}")));
-            }
+        if let TaskChoice::Fixed(index) = choice
+            && index >= self.benchmark.tasks.len()
+        {
+            return Err(Error::UnknownTask(format!("#{index}")));
         }
         self.choice = choice;
         Ok(())
@@ -122,7 +122,11 @@ impl GraspEnv {
     pub fn grasp_location(&self) -> Option<Vec3> {
         let scene = self.scene.as_ref()?;
         let object = scene.world.bodies.get(scene.object)?;
-        Some(object.position().transform_point(Vec3::from(self.task().grasp.offset)))
+        Some(
+            object
+                .position()
+                .transform_point(Vec3::from(self.task().grasp.offset)),
+        )
     }
 
     /// Resets into a given task (index) with a seed.
@@ -135,7 +139,12 @@ impl GraspEnv {
         let task = &self.benchmark.tasks[task_index];
         let object = self.benchmark.object_of(task);
         let scene = scene::build(task, object, &self.config, &mut rng);
-        let mut judge = Judge::new(task, object.fragility.grasp_force_limit(), object.anchor.is_some(), &self.config);
+        let mut judge = Judge::new(
+            task,
+            object.fragility.grasp_force_limit(),
+            object.anchor.is_some(),
+            &self.config,
+        );
         judge.set_stage(&self.stage);
         self.mount_target = scene.mount_start;
         self.scene = Some(scene);
@@ -190,12 +199,17 @@ impl GraspEnv {
             }
             bounded
         };
-        let delta = Vec3::new(clip(action[0], MAX_PALM_STEP), clip(action[1], MAX_PALM_STEP), clip(action[2], MAX_PALM_STEP));
+        let delta = Vec3::new(
+            clip(action[0], MAX_PALM_STEP),
+            clip(action[1], MAX_PALM_STEP),
+            clip(action[2], MAX_PALM_STEP),
+        );
         let shape = self.benchmark.tasks[self.task_index].topology.shape();
         for finger in 0..5 {
             let step = clip(action[3 + finger], MAX_FINGER_STEP);
             if shape[finger].active && step != 0.0 {
-                let command = (scene.hand.commands[finger] + step).clamp(shape[finger].preshape, max_flex(finger));
+                let command = (scene.hand.commands[finger] + step)
+                    .clamp(shape[finger].preshape, max_flex(finger));
                 scene.hand.set_command(&mut scene.world, finger, command);
             }
         }
@@ -211,10 +225,15 @@ impl GraspEnv {
         let mut last = ContactMetrics::default();
         for k in 1..=substeps {
             let alpha = k as f32 / substeps as f32;
-            scene.hand.move_mount(&mut scene.world, start.lerp(target, alpha));
+            scene
+                .hand
+                .move_mount(&mut scene.world, start.lerp(target, alpha));
             scene.world.step();
             last = object_contacts(&scene.world, object, |_, collider| {
-                collider.collision_groups().memberships.intersects(HAND_GROUP)
+                collider
+                    .collision_groups()
+                    .memberships
+                    .intersects(HAND_GROUP)
             });
             averaged.accumulate(&last);
         }
@@ -233,14 +252,25 @@ impl GraspEnv {
     }
 
     /// Computes the observation parts and the events from the world's current state.
-    fn observe(&mut self, contacts: &ContactMetrics, _substeps: usize) -> Result<Vec<&'static str>> {
+    fn observe(
+        &mut self,
+        contacts: &ContactMetrics,
+        _substeps: usize,
+    ) -> Result<Vec<&'static str>> {
         let scene = self.scene.as_ref().ok_or(Error::NotReset)?;
         let task = &self.benchmark.tasks[self.task_index];
         let object = self.benchmark.object_of(task);
-        let body = scene.world.bodies.get(scene.object).ok_or(Error::NotReset)?;
+        let body = scene
+            .world
+            .bodies
+            .get(scene.object)
+            .ok_or(Error::NotReset)?;
         let pose = *body.position();
         if !pose.translation.is_finite() {
-            return Err(Error::Diverged(format!("object position {:?}", pose.translation)));
+            return Err(Error::Diverged(format!(
+                "object position {:?}",
+                pose.translation
+            )));
         }
         let grasp_location = pose.transform_point(Vec3::from(task.grasp.offset));
         let grasp_point = scene.hand.grasp_point(&scene.world);
@@ -248,7 +278,10 @@ impl GraspEnv {
         let displacement = pose.translation - scene.object_start.translation;
         let up = pose.rotation * Vec3::Z;
         let limit = object.fragility.grasp_force_limit();
-        let twist_torque = contacts.torque_about(scene.object_start.translation, scene.object_start.rotation * Vec3::Z);
+        let twist_torque = contacts.torque_about(
+            scene.object_start.translation,
+            scene.object_start.rotation * Vec3::Z,
+        );
         let snapshot = Snapshot {
             arrive_error: (grasp_point - grasp_location).to_array(),
             displacement: displacement.to_array(),

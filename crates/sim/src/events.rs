@@ -100,7 +100,10 @@ impl Judge {
     /// The events that hold after this control step and, for `fail`, why.
     pub fn judge(&mut self, s: &Snapshot) -> (Vec<&'static str>, Option<FailCause>) {
         let mut events = Vec::new();
-        if s.arrive_error.iter().all(|e| e.abs() <= self.arrive_tolerance) {
+        if s.arrive_error
+            .iter()
+            .all(|e| e.abs() <= self.arrive_tolerance)
+        {
             events.push("arrive");
         }
         let horizontal = (s.displacement[0].powi(2) + s.displacement[1].powi(2)).sqrt();
@@ -132,7 +135,11 @@ impl Judge {
                 _ => s.press_force,
             };
             let target = self.required.abs();
-            self.sustained_steps = if measure >= target { self.sustained_steps + 1 } else { 0 };
+            self.sustained_steps = if measure >= target {
+                self.sustained_steps + 1
+            } else {
+                0
+            };
             self.progress = (measure / target).clamp(0.0, 1.0);
             self.seconds(self.sustained_steps) >= self.sustain_s - 1e-6
         };
@@ -214,7 +221,10 @@ mod tests {
         for _ in 0..steps / 2 {
             judge.judge(&held());
         }
-        judge.judge(&Snapshot { speed: 1.0, ..held() });
+        judge.judge(&Snapshot {
+            speed: 1.0,
+            ..held()
+        });
         for _ in 0..steps - 1 {
             let (events, _) = judge.judge(&held());
             assert!(!events.contains(&"succ"));
@@ -226,24 +236,47 @@ mod tests {
     fn twist_needs_the_torque_in_the_task_direction_for_the_sustain_time() {
         let (mut judge, config) = grasping_judge(Objective::Twist, Some(-0.2));
         let steps = (config.sustain_s / config.control_dt()).ceil() as usize;
-        let wrong_way = Snapshot { twist_torque: 0.5, contacts: 2, ..Snapshot::default() };
+        let wrong_way = Snapshot {
+            twist_torque: 0.5,
+            contacts: 2,
+            ..Snapshot::default()
+        };
         for _ in 0..3 * steps {
             assert!(!judge.judge(&wrong_way).0.contains(&"succ"));
         }
-        let right_way = Snapshot { twist_torque: -0.25, contacts: 2, ..Snapshot::default() };
-        let fired: Vec<bool> = (0..steps).map(|_| judge.judge(&right_way).0.contains(&"succ")).collect();
-        assert!(fired[..steps - 1].iter().all(|f| !f) && fired[steps - 1], "{fired:?}");
+        let right_way = Snapshot {
+            twist_torque: -0.25,
+            contacts: 2,
+            ..Snapshot::default()
+        };
+        let fired: Vec<bool> = (0..steps)
+            .map(|_| judge.judge(&right_way).0.contains(&"succ"))
+            .collect();
+        assert!(
+            fired[..steps - 1].iter().all(|f| !f) && fired[steps - 1],
+            "{fired:?}"
+        );
     }
 
     #[test]
     fn press_needs_the_force_along_the_press_direction() {
         let (mut judge, config) = grasping_judge(Objective::Press, Some(6.0));
         let steps = (config.sustain_s / config.control_dt()).ceil() as usize;
-        let weak = Snapshot { press_force: 5.0, contacts: 3, grip: 5.0, ..Snapshot::default() };
+        let weak = Snapshot {
+            press_force: 5.0,
+            contacts: 3,
+            grip: 5.0,
+            ..Snapshot::default()
+        };
         for _ in 0..3 * steps {
             assert!(!judge.judge(&weak).0.contains(&"succ"));
         }
-        let firm = Snapshot { press_force: 7.0, contacts: 3, grip: 7.0, ..Snapshot::default() };
+        let firm = Snapshot {
+            press_force: 7.0,
+            contacts: 3,
+            grip: 7.0,
+            ..Snapshot::default()
+        };
         let succeeded = (0..steps).any(|_| judge.judge(&firm).0.contains(&"succ"));
         assert!(succeeded);
         assert!((judge.progress() - 1.0).abs() < 1e-6);
@@ -252,7 +285,10 @@ mod tests {
     #[test]
     fn squeezing_above_the_fragility_limit_fails_the_grasp() {
         let (mut judge, config) = grasping_judge(Objective::Lift, None);
-        let crush = Snapshot { grip: 25.0, ..held() };
+        let crush = Snapshot {
+            grip: 25.0,
+            ..held()
+        };
         for _ in 0..config.crush_steps - 1 {
             assert!(!judge.judge(&crush).0.contains(&"fail"));
         }
@@ -271,7 +307,10 @@ mod tests {
 
         let (mut judge, config) = grasping_judge(Objective::Pull, None);
         let limit = (config.grasp_timeout_s / config.control_dt()).round() as usize;
-        let idle = Snapshot { contacts: 1, ..Snapshot::default() };
+        let idle = Snapshot {
+            contacts: 1,
+            ..Snapshot::default()
+        };
         for _ in 0..limit {
             assert!(!judge.judge(&idle).0.contains(&"fail"));
         }
@@ -283,10 +322,17 @@ mod tests {
         let config = SimConfig::deterministic();
         let mut judge = Judge::new(&task(Objective::Lift, None), 20.0, false, &config);
         judge.set_stage("approach");
-        let (events, _) = judge.judge(&Snapshot { grip: 100.0, ..held() });
+        let (events, _) = judge.judge(&Snapshot {
+            grip: 100.0,
+            ..held()
+        });
         assert!(events.contains(&"arrive"));
         assert!(!events.contains(&"fail") && !events.contains(&"succ"));
-        let (events, _) = judge.judge(&Snapshot { displacement: [0.2, 0.0, 0.0], arrive_error: [0.1; 3], ..Snapshot::default() });
+        let (events, _) = judge.judge(&Snapshot {
+            displacement: [0.2, 0.0, 0.0],
+            arrive_error: [0.1; 3],
+            ..Snapshot::default()
+        });
         assert_eq!(events, vec!["aor", "gor"]);
     }
 }

@@ -24,7 +24,11 @@ pub const MAX_THUMB_FLEX: f32 = 2.1;
 
 /// Largest command of a finger (thumb first).
 pub fn max_flex(finger: usize) -> f32 {
-    if finger == 0 { MAX_THUMB_FLEX } else { MAX_FLEX }
+    if finger == 0 {
+        MAX_THUMB_FLEX
+    } else {
+        MAX_FLEX
+    }
 }
 
 /// The point of the hand that goes to the grasp location, in the hand frame: the centre of
@@ -108,7 +112,11 @@ pub fn coupled_angles(finger: usize, command: f32) -> Vec<f32> {
     if finger == 0 {
         vec![command, ALPHA_TMCP * command]
     } else {
-        vec![ALPHA_MCP * command, command, ALPHA_DIP[finger - 1] * command]
+        vec![
+            ALPHA_MCP * command,
+            command,
+            ALPHA_DIP[finger - 1] * command,
+        ]
     }
 }
 
@@ -130,12 +138,21 @@ pub struct Hand {
 }
 
 fn hand_groups() -> InteractionGroups {
-    InteractionGroups::new(HAND_GROUP, OBJECT_GROUP | TABLE_GROUP, InteractionTestMode::And)
+    InteractionGroups::new(
+        HAND_GROUP,
+        OBJECT_GROUP | TABLE_GROUP,
+        InteractionTestMode::And,
+    )
 }
 
 impl Hand {
     /// Builds the hand at `pose` (hand frame in the world) with the given finger shape.
-    pub fn build(world: &mut PhysicsWorld, pose: Pose, shape: &[FingerShape; 5], joint_offsets: Vec<Vec<f32>>) -> Self {
+    pub fn build(
+        world: &mut PhysicsWorld,
+        pose: Pose,
+        shape: &[FingerShape; 5],
+        joint_offsets: Vec<Vec<f32>>,
+    ) -> Self {
         let mount = world.insert_body(RigidBodyBuilder::kinematic_position_based().pose(pose));
         let palm_body = RigidBodyBuilder::dynamic().pose(pose).gravity_scale(0.0);
         let palm_collider = ColliderBuilder::cuboid(PALM_HALF[0], PALM_HALF[1], PALM_HALF[2])
@@ -158,7 +175,8 @@ impl Hand {
         let commands: [f32; 5] = std::array::from_fn(|i| shape[i].preshape);
         for (index, chain) in chains().iter().enumerate() {
             let angles = coupled_angles(index, commands[index]);
-            let axis_frame = Rotation::from_rotation_z(chain.axis_sign * std::f32::consts::FRAC_PI_2);
+            let axis_frame =
+                Rotation::from_rotation_z(chain.axis_sign * std::f32::consts::FRAC_PI_2);
             let mut parent = palm;
             let mut parent_anchor = Vec3::from(chain.base);
             let mut parent_rotation = Rotation::from_rotation_y(chain.base_pitch);
@@ -169,20 +187,34 @@ impl Hand {
             for (k, spec) in chain.links.iter().enumerate() {
                 let flex = Rotation::from_rotation_y(chain.axis_sign * angles[k]);
                 let link_pose = joint_pose * Pose::from_rotation(flex);
-                let body = RigidBodyBuilder::dynamic().pose(link_pose).gravity_scale(0.0);
+                let body = RigidBodyBuilder::dynamic()
+                    .pose(link_pose)
+                    .gravity_scale(0.0);
                 let collider = ColliderBuilder::capsule_x(spec.length * 0.5, spec.radius)
                     .translation(Vec3::new(spec.length * 0.5, 0.0, 0.0))
                     .mass(spec.mass)
                     .friction(HAND_FRICTION)
                     .collision_groups(hand_groups());
                 let (handle, _) = world.insert(body, collider);
-                let offset = joint_offsets.get(index).and_then(|o| o.get(k)).copied().unwrap_or(0.0);
+                let offset = joint_offsets
+                    .get(index)
+                    .and_then(|o| o.get(k))
+                    .copied()
+                    .unwrap_or(0.0);
                 let joint = GenericJointBuilder::new(JointAxesMask::LOCKED_REVOLUTE_AXES)
-                    .local_frame1(Pose::from_parts(parent_anchor, parent_rotation * axis_frame))
+                    .local_frame1(Pose::from_parts(
+                        parent_anchor,
+                        parent_rotation * axis_frame,
+                    ))
                     .local_frame2(Pose::from_parts(Vec3::ZERO, axis_frame))
                     .limits(JointAxis::AngX, [-0.2, max_flex(index) + 0.3])
                     .motor_model(JointAxis::AngX, MotorModel::ForceBased)
-                    .motor_position(JointAxis::AngX, angles[k] + offset, FINGER_STIFFNESS, FINGER_DAMPING)
+                    .motor_position(
+                        JointAxis::AngX,
+                        angles[k] + offset,
+                        FINGER_STIFFNESS,
+                        FINGER_DAMPING,
+                    )
                     .motor_max_force(JointAxis::AngX, spec.max_torque);
                 finger_joints.push(world.insert_impulse_joint(parent, handle, joint));
                 finger_links.push(handle);
@@ -212,7 +244,12 @@ impl Hand {
         self.commands[finger] = command;
         let chain = chains();
         for (k, angle) in coupled_angles(finger, command).into_iter().enumerate() {
-            let offset = self.joint_offsets.get(finger).and_then(|o| o.get(k)).copied().unwrap_or(0.0);
+            let offset = self
+                .joint_offsets
+                .get(finger)
+                .and_then(|o| o.get(k))
+                .copied()
+                .unwrap_or(0.0);
             if let Some(joint) = world.impulse_joints.get_mut(self.joints[finger][k], true) {
                 joint.data.set_motor_position(
                     JointAxis::AngX,
@@ -220,24 +257,35 @@ impl Hand {
                     FINGER_STIFFNESS,
                     FINGER_DAMPING,
                 );
-                joint.data.set_motor_max_force(JointAxis::AngX, chain[finger].links[k].max_torque);
+                joint
+                    .data
+                    .set_motor_max_force(JointAxis::AngX, chain[finger].links[k].max_torque);
             }
         }
     }
 
     /// Where the arm holds the hand (the mount's pose).
     pub fn mount_pose(&self, world: &PhysicsWorld) -> Pose {
-        world.bodies.get(self.mount).map(|b| *b.position()).unwrap_or_default()
+        world
+            .bodies
+            .get(self.mount)
+            .map(|b| *b.position())
+            .unwrap_or_default()
     }
 
     /// The palm's pose (it lags the mount by the wrist's compliance).
     pub fn palm_pose(&self, world: &PhysicsWorld) -> Pose {
-        world.bodies.get(self.palm).map(|b| *b.position()).unwrap_or_default()
+        world
+            .bodies
+            .get(self.palm)
+            .map(|b| *b.position())
+            .unwrap_or_default()
     }
 
     /// The grasp point of the hand in the world.
     pub fn grasp_point(&self, world: &PhysicsWorld) -> Vec3 {
-        self.palm_pose(world).transform_point(Vec3::from(GRASP_POINT))
+        self.palm_pose(world)
+            .transform_point(Vec3::from(GRASP_POINT))
     }
 
     /// Moves the mount to `translation` at the end of the next physics step.

@@ -62,7 +62,9 @@ pub const FEATURES: [&str; 38] = [
 
 /// Names of the union action space's dimensions (paper, section IV-B): palm increments (m)
 /// and PIP command increments (rad) of thumb, index, middle, ring and little finger.
-pub const ACTIONS: [&str; 8] = ["dx", "dy", "dz", "thumb", "index", "middle", "ring", "little"];
+pub const ACTIONS: [&str; 8] = [
+    "dx", "dy", "dz", "thumb", "index", "middle", "ring", "little",
+];
 
 /// Largest palm step (m) and finger step (rad) the hand accepts per control step; larger
 /// values are clipped and counted.
@@ -107,9 +109,21 @@ impl ObservationParts {
         out.push(self.grip);
         out.push(self.progress);
         let objective = self.objective.map(Objective::index);
-        out.extend(Objective::ALL.iter().map(|o| if Some(o.index()) == objective { 1.0 } else { 0.0 }));
+        out.extend(Objective::ALL.iter().map(|o| {
+            if Some(o.index()) == objective {
+                1.0
+            } else {
+                0.0
+            }
+        }));
         let topology = self.topology.map(Topology::index);
-        out.extend(Topology::ALL.iter().map(|t| if Some(t.index()) == topology { 1.0 } else { 0.0 }));
+        out.extend(Topology::ALL.iter().map(|t| {
+            if Some(t.index()) == topology {
+                1.0
+            } else {
+                0.0
+            }
+        }));
         debug_assert_eq!(out.len(), FEATURES.len());
         out
     }

@@ -64,7 +64,11 @@ impl Oracle {
         let rel = parts.relative;
         if stage == "approach" {
             let horizontal = (rel[0] * rel[0] + rel[1] * rel[1]).sqrt();
-            let z_goal = if horizontal > 0.01 { rel[2] + CLEARANCE } else { rel[2] };
+            let z_goal = if horizontal > 0.01 {
+                rel[2] + CLEARANCE
+            } else {
+                rel[2]
+            };
             action[0] = unit(rel[0], APPROACH_SCALE);
             action[1] = unit(rel[1], APPROACH_SCALE);
             action[2] = unit(z_goal, APPROACH_SCALE);
@@ -89,7 +93,11 @@ impl Oracle {
                 action[2] = unit(rel[2], GRASP_SCALE);
                 let close_enough = rel.iter().all(|r| r.abs() < 0.003);
                 if close_enough || self.phase_steps > 10 {
-                    self.enter(if task.objective == Objective::Press { Phase::Act } else { Phase::Close });
+                    self.enter(if task.objective == Objective::Press {
+                        Phase::Act
+                    } else {
+                        Phase::Close
+                    });
                 }
             }
             Phase::Close => {
@@ -138,7 +146,8 @@ impl Oracle {
                     .scene()
                     .map(|s| s.object_start.rotation)
                     .unwrap_or_default();
-                let motion = start_yaw * rapier3d::prelude::Vec3::from(task.motion).normalize_or_zero();
+                let motion =
+                    start_yaw * rapier3d::prelude::Vec3::from(task.motion).normalize_or_zero();
                 match task.objective {
                     Objective::Press => {
                         let required = task.required.unwrap_or(0.0).abs();

@@ -88,7 +88,11 @@ pub fn build(task: &Task, object: &Object, config: &SimConfig, rng: &mut ChaCha8
     world.gravity = Vec3::new(0.0, 0.0, -9.81);
     world.integration_parameters = integration_parameters(config);
 
-    let everything = InteractionGroups::new(TABLE_GROUP, HAND_GROUP | OBJECT_GROUP, InteractionTestMode::And);
+    let everything = InteractionGroups::new(
+        TABLE_GROUP,
+        HAND_GROUP | OBJECT_GROUP,
+        InteractionTestMode::And,
+    );
     let table = world.insert_collider(
         ColliderBuilder::cuboid(TABLE_HALF[0], TABLE_HALF[1], TABLE_HALF[2])
             .translation(Vec3::new(0.0, 0.0, -TABLE_HALF[2]))
@@ -108,10 +112,17 @@ pub fn build(task: &Task, object: &Object, config: &SimConfig, rng: &mut ChaCha8
         (0.0, 0.0, 0.0)
     };
     let (min, _) = object.bounds();
-    let object_start = Pose::from_parts(Vec3::new(dx, dy, -min[2] + 0.0005), Rotation::from_rotation_z(dyaw));
+    let object_start = Pose::from_parts(
+        Vec3::new(dx, dy, -min[2] + 0.0005),
+        Rotation::from_rotation_z(dyaw),
+    );
     let handle = world.insert_body(RigidBodyBuilder::dynamic().pose(object_start));
     let total_volume: f32 = object.parts.iter().map(|p| p.shape.volume()).sum();
-    let object_groups = InteractionGroups::new(OBJECT_GROUP, HAND_GROUP | TABLE_GROUP, InteractionTestMode::And);
+    let object_groups = InteractionGroups::new(
+        OBJECT_GROUP,
+        HAND_GROUP | TABLE_GROUP,
+        InteractionTestMode::And,
+    );
     for part in &object.parts {
         let collider = part_collider(&part.shape);
         let local = Pose::from_translation(Vec3::from(part.pos)) * collider.position;
@@ -142,11 +153,22 @@ pub fn build(task: &Task, object: &Object, config: &SimConfig, rng: &mut ChaCha8
         .map(|finger| {
             let joints = if finger == 0 { 2 } else { 3 };
             (0..joints)
-                .map(|_| if noise.enabled { symmetric(rng, noise.joint) } else { 0.0 })
+                .map(|_| {
+                    if noise.enabled {
+                        symmetric(rng, noise.joint)
+                    } else {
+                        0.0
+                    }
+                })
                 .collect()
         })
         .collect();
-    let hand = Hand::build(&mut world, Pose::from_parts(mount_start, hand_rotation), &shape, joint_offsets);
+    let hand = Hand::build(
+        &mut world,
+        Pose::from_parts(mount_start, hand_rotation),
+        &shape,
+        joint_offsets,
+    );
     Scene {
         world,
         hand,

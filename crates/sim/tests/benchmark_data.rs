@@ -11,16 +11,33 @@ fn the_benchmark_has_20_objects_7_objectives_6_topologies_and_26_tasks() {
     assert_eq!(benchmark.objects.len(), 20);
     assert_eq!(benchmark.tasks.len(), 26);
     for objective in Objective::ALL {
-        assert!(benchmark.tasks.iter().any(|t| t.objective == objective), "no task for {objective:?}");
+        assert!(
+            benchmark.tasks.iter().any(|t| t.objective == objective),
+            "no task for {objective:?}"
+        );
     }
     for topology in Topology::ALL {
-        assert!(benchmark.tasks.iter().any(|t| t.topology == topology), "no task for {topology:?}");
+        assert!(
+            benchmark.tasks.iter().any(|t| t.topology == topology),
+            "no task for {topology:?}"
+        );
     }
     for object in &benchmark.objects {
-        assert!(benchmark.tasks.iter().any(|t| t.object == object.name), "object {} has no task", object.name);
+        assert!(
+            benchmark.tasks.iter().any(|t| t.object == object.name),
+            "object {} has no task",
+            object.name
+        );
         let dims = object.dimensions();
-        assert!(dims.iter().all(|d| *d > 0.005 && *d < 0.4), "{}: {dims:?}", object.name);
-        assert_eq!(object.features().len(), grasp_sim::benchmark::OBJECT_FEATURES.len());
+        assert!(
+            dims.iter().all(|d| *d > 0.005 && *d < 0.4),
+            "{}: {dims:?}",
+            object.name
+        );
+        assert_eq!(
+            object.features().len(),
+            grasp_sim::benchmark::OBJECT_FEATURES.len()
+        );
     }
 }
 
@@ -33,13 +50,24 @@ fn the_grasping_spec_fits_the_environment_and_orders_rewards_as_the_paper_requir
     let event = |name: &str| machine.event_id(name).expect(name);
     let approach = stage("approach");
     let grasp = stage("grasp");
-    let r_arrive = machine.edge_reward(approach, event("arrive")).expect("arrive edge");
-    let r_aor = machine.edge_reward(approach, event("aor")).expect("aor edge");
+    let r_arrive = machine
+        .edge_reward(approach, event("arrive"))
+        .expect("arrive edge");
+    let r_aor = machine
+        .edge_reward(approach, event("aor"))
+        .expect("aor edge");
     let r_gor = machine.edge_reward(grasp, event("gor")).expect("gor edge");
-    let r_fail = machine.edge_reward(grasp, event("fail")).expect("fail edge");
-    let r_succ = machine.edge_reward(grasp, event("succ")).expect("succ edge");
+    let r_fail = machine
+        .edge_reward(grasp, event("fail"))
+        .expect("fail edge");
+    let r_succ = machine
+        .edge_reward(grasp, event("succ"))
+        .expect("succ edge");
     // Paper, section IV-D: R_aor < R_gor < R_fail < 0 < R_arrive, success the largest.
-    assert!(r_aor < r_gor && r_gor < r_fail && r_fail < 0.0 && 0.0 < r_arrive, "{r_aor} {r_gor} {r_fail} {r_arrive}");
+    assert!(
+        r_aor < r_gor && r_gor < r_fail && r_fail < 0.0 && 0.0 < r_arrive,
+        "{r_aor} {r_gor} {r_fail} {r_arrive}"
+    );
     assert!(r_succ > r_arrive);
     // R_arrive is above the best reward the approach stage can give.
     assert!(r_arrive > machine.best_intra_reward(approach));
@@ -59,15 +87,26 @@ fn a_malformed_benchmark_file_is_refused_with_file_path_and_reason() {
     let builtin = Benchmark::builtin();
     let mut value = serde_json::to_value(&builtin).expect("serializes");
     value["tasks"][3]["object"] = "teapot".into();
-    let err = Benchmark::from_json(&value.to_string(), "edited.json").expect_err("unknown object").to_string();
-    assert!(err.contains("edited.json") && err.contains("tasks[3]") && err.contains("unknown object \"teapot\""), "{err}");
+    let err = Benchmark::from_json(&value.to_string(), "edited.json")
+        .expect_err("unknown object")
+        .to_string();
+    assert!(
+        err.contains("edited.json")
+            && err.contains("tasks[3]")
+            && err.contains("unknown object \"teapot\""),
+        "{err}"
+    );
 
     let mut value = serde_json::to_value(&builtin).expect("serializes");
     value["objects"][0]["mass"] = (-1.0).into();
-    let err = Benchmark::from_json(&value.to_string(), "edited.json").expect_err("negative mass").to_string();
+    let err = Benchmark::from_json(&value.to_string(), "edited.json")
+        .expect_err("negative mass")
+        .to_string();
     assert!(err.contains("objects[0] (mug).mass"), "{err}");
 
-    let err = Benchmark::from_json("{\"objects\": [], \"tasks\": 7}", "bad.json").expect_err("type error").to_string();
+    let err = Benchmark::from_json("{\"objects\": [], \"tasks\": 7}", "bad.json")
+        .expect_err("type error")
+        .to_string();
     assert!(err.contains("bad.json at line 1"), "{err}");
 
     let dir = std::env::temp_dir().join("grasp-sim-missing-benchmark.json");
@@ -79,10 +118,14 @@ fn a_malformed_benchmark_file_is_refused_with_file_path_and_reason() {
 fn a_spec_that_does_not_fit_the_environment_is_refused() {
     let mut spec = grasping_spec();
     spec.features.swap(0, 1);
-    let err = check_compatible(&spec).expect_err("swapped features").to_string();
+    let err = check_compatible(&spec)
+        .expect_err("swapped features")
+        .to_string();
     assert!(err.contains("features[0]"), "{err}");
     let mut spec = grasping_spec();
     spec.events.push("teleport".into());
-    let err = check_compatible(&spec).expect_err("unknown event").to_string();
+    let err = check_compatible(&spec)
+        .expect_err("unknown event")
+        .to_string();
     assert!(err.contains("teleport"), "{err}");
 }

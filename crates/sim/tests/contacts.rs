@@ -25,10 +25,14 @@ fn box_scene_ordered(height: f32, box_first: bool) -> BoxScene {
     world.gravity = Vec3::new(0.0, 0.0, -9.81);
     world.integration_parameters = integration_parameters(&SimConfig::deterministic());
     let early = if box_first {
-        Some(world.insert(
-            RigidBodyBuilder::dynamic().translation(Vec3::new(0.0, 0.0, height)),
-            ColliderBuilder::cuboid(HALF, HALF, HALF).mass(MASS).friction(0.6),
-        ))
+        Some(
+            world.insert(
+                RigidBodyBuilder::dynamic().translation(Vec3::new(0.0, 0.0, height)),
+                ColliderBuilder::cuboid(HALF, HALF, HALF)
+                    .mass(MASS)
+                    .friction(0.6),
+            ),
+        )
     } else {
         None
     };
@@ -42,14 +46,18 @@ fn box_scene_ordered(height: f32, box_first: bool) -> BoxScene {
         Some(handles) => handles,
         None => world.insert(
             RigidBodyBuilder::dynamic().translation(Vec3::new(0.0, 0.0, height)),
-            ColliderBuilder::cuboid(HALF, HALF, HALF).mass(MASS).friction(0.6),
+            ColliderBuilder::cuboid(HALF, HALF, HALF)
+                .mass(MASS)
+                .friction(0.6),
         ),
     };
     BoxScene { world, body }
 }
 
 fn table_contacts(scene: &BoxScene) -> ContactMetrics {
-    object_contacts(&scene.world, scene.body, |_, collider| collider.parent().is_none())
+    object_contacts(&scene.world, scene.body, |_, collider| {
+        collider.parent().is_none()
+    })
 }
 
 #[test]
@@ -62,9 +70,16 @@ fn a_resting_box_pushes_its_weight_into_the_table() {
     let weight = MASS * 9.81;
     assert!(metrics.count() > 0, "no contact reported for a resting box");
     let normal: f32 = metrics.points.iter().map(|p| p.normal_force).sum();
-    assert!((normal - weight).abs() < 0.05 * weight, "summed normal force {normal} vs m*g {weight}");
+    assert!(
+        (normal - weight).abs() < 0.05 * weight,
+        "summed normal force {normal} vs m*g {weight}"
+    );
     // The table's force on the box points up and balances gravity.
-    assert!((metrics.force.z - weight).abs() < 0.05 * weight, "net force {:?}", metrics.force);
+    assert!(
+        (metrics.force.z - weight).abs() < 0.05 * weight,
+        "net force {:?}",
+        metrics.force
+    );
     assert!(metrics.force.x.abs() < 0.05 && metrics.force.y.abs() < 0.05);
 }
 
@@ -89,7 +104,12 @@ fn friction_opposes_a_sideways_push_below_the_static_limit() {
 
 fn friction_opposes_push(box_first: bool) {
     let mut scene = box_scene_ordered(HALF, box_first);
-    let pair = scene.world.narrow_phase.contact_pairs().next().map(|p| (p.collider1, p.collider2));
+    let pair = scene
+        .world
+        .narrow_phase
+        .contact_pairs()
+        .next()
+        .map(|p| (p.collider1, p.collider2));
     eprintln!("box_first={box_first} pair={pair:?}");
     for _ in 0..120 {
         scene.world.step();
@@ -104,12 +124,29 @@ fn friction_opposes_push(box_first: bool) {
         scene.world.step();
         metrics = table_contacts(&scene);
     }
-    let pair = scene.world.narrow_phase.contact_pairs().next().map(|p| (p.collider1, p.collider2));
-    eprintln!("box_first={box_first} pair={pair:?} force={:?}", metrics.force);
-    assert!((metrics.force.x + push).abs() < 0.1, "friction on the box {:?} should be -{push} N along x", metrics.force);
+    let pair = scene
+        .world
+        .narrow_phase
+        .contact_pairs()
+        .next()
+        .map(|p| (p.collider1, p.collider2));
+    eprintln!(
+        "box_first={box_first} pair={pair:?} force={:?}",
+        metrics.force
+    );
+    assert!(
+        (metrics.force.x + push).abs() < 0.1,
+        "friction on the box {:?} should be -{push} N along x",
+        metrics.force
+    );
     // Well inside the cone: 1 N of friction against mu * m * g = 2.9 N.
     assert!(metrics.in_cone(0.05));
-    let moved = scene.world.bodies.get(scene.body).map(|b| b.translation().x).unwrap_or(1.0);
+    let moved = scene
+        .world
+        .bodies
+        .get(scene.body)
+        .map(|b| b.translation().x)
+        .unwrap_or(1.0);
     assert!(moved.abs() < 1e-3, "the box slid {moved} m");
 }
 
@@ -129,8 +166,15 @@ fn a_sliding_box_is_outside_the_cone() {
         metrics = table_contacts(&scene);
     }
     // The solver clamps friction to the cone: a sliding contact sits on its boundary.
-    assert!(!metrics.in_cone(0.05), "a sliding box must fail the friction-cone test");
-    assert!(metrics.force.x < -2.0, "kinetic friction opposes the push: {:?}", metrics.force);
+    assert!(
+        !metrics.in_cone(0.05),
+        "a sliding box must fail the friction-cone test"
+    );
+    assert!(
+        metrics.force.x < -2.0,
+        "kinetic friction opposes the push: {:?}",
+        metrics.force
+    );
 }
 
 /// Two dynamic bodies take another solver path than a body on the fixed table: the friction
@@ -142,15 +186,25 @@ fn friction_between_two_dynamic_bodies_opposes_the_push() {
         world.gravity = Vec3::new(0.0, 0.0, -9.81);
         world.integration_parameters = integration_parameters(&SimConfig::deterministic());
         let top_body = RigidBodyBuilder::dynamic().translation(Vec3::new(0.0, 0.0, 3.0 * HALF));
-        let top_collider = ColliderBuilder::cuboid(HALF, HALF, HALF).mass(MASS).friction(0.6);
-        let top = if top_first { Some(world.insert(top_body.clone(), top_collider.clone()).0) } else { None };
+        let top_collider = ColliderBuilder::cuboid(HALF, HALF, HALF)
+            .mass(MASS)
+            .friction(0.6);
+        let top = if top_first {
+            Some(world.insert(top_body.clone(), top_collider.clone()).0)
+        } else {
+            None
+        };
         world.insert_collider(
-            ColliderBuilder::cuboid(TABLE_HALF[0], TABLE_HALF[1], TABLE_HALF[2]).translation(Vec3::new(0.0, 0.0, -TABLE_HALF[2])).friction(1.0),
+            ColliderBuilder::cuboid(TABLE_HALF[0], TABLE_HALF[1], TABLE_HALF[2])
+                .translation(Vec3::new(0.0, 0.0, -TABLE_HALF[2]))
+                .friction(1.0),
             None,
         );
         let (bottom, _) = world.insert(
             RigidBodyBuilder::dynamic().translation(Vec3::new(0.0, 0.0, HALF)),
-            ColliderBuilder::cuboid(2.0 * HALF, 2.0 * HALF, HALF).mass(5.0).friction(0.6),
+            ColliderBuilder::cuboid(2.0 * HALF, 2.0 * HALF, HALF)
+                .mass(5.0)
+                .friction(0.6),
         );
         let top = top.unwrap_or_else(|| world.insert(top_body, top_collider).0);
         for _ in 0..120 {
@@ -166,7 +220,15 @@ fn friction_between_two_dynamic_bodies_opposes_the_push() {
             metrics = object_contacts(&world, top, |_, collider| collider.parent() == Some(bottom));
         }
         let weight = MASS * 9.81;
-        assert!((metrics.force.z - weight).abs() < 0.05 * weight, "top_first={top_first}: {:?}", metrics.force);
-        assert!((metrics.force.x + 1.0).abs() < 0.1, "top_first={top_first}: friction {:?}", metrics.force);
+        assert!(
+            (metrics.force.z - weight).abs() < 0.05 * weight,
+            "top_first={top_first}: {:?}",
+            metrics.force
+        );
+        assert!(
+            (metrics.force.x + 1.0).abs() < 0.1,
+            "top_first={top_first}: friction {:?}",
+            metrics.force
+        );
     }
 }

@@ -31,9 +31,16 @@ fn a_non_finite_action_is_refused_naming_the_dimension() {
 fn out_of_range_actions_are_clipped_and_counted() {
     let mut env = env(SimConfig::deterministic());
     let start = env.reset_task(0, 1).expect("reset");
-    let before = env.scene().map(|s| s.hand.mount_pose(&s.world).translation).expect("scene");
-    env.step_action(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]).expect("step");
-    let after = env.scene().map(|s| s.hand.mount_pose(&s.world).translation).expect("scene");
+    let before = env
+        .scene()
+        .map(|s| s.hand.mount_pose(&s.world).translation)
+        .expect("scene");
+    env.step_action(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+        .expect("step");
+    let after = env
+        .scene()
+        .map(|s| s.hand.mount_pose(&s.world).translation)
+        .expect("scene");
     assert_eq!(env.clipped_actions(), 1);
     assert!(((after.x - before.x) - grasp_sim::observation::MAX_PALM_STEP).abs() < 1e-5);
     assert_eq!(start.len(), FEATURES.len());
@@ -48,7 +55,16 @@ fn the_same_seed_gives_a_bitwise_identical_trajectory() {
         bits.extend(first.iter().map(|v| v.to_bits()));
         for k in 0..40 {
             let t = k as f32 * 0.1;
-            let action = [0.006 * t.sin(), 0.004 * t.cos(), -0.005, 0.05, 0.05, 0.05, 0.05, 0.05];
+            let action = [
+                0.006 * t.sin(),
+                0.004 * t.cos(),
+                -0.005,
+                0.05,
+                0.05,
+                0.05,
+                0.05,
+                0.05,
+            ];
             let step = env.step_action(&action).expect("step");
             bits.extend(step.observation.iter().map(|v| v.to_bits()));
         }
@@ -68,7 +84,9 @@ fn randomization_stays_in_the_papers_ranges_and_is_off_when_disabled() {
         env.reset_task(2, seed).expect("reset");
         let scene = env.scene().expect("scene");
         let start = scene.object_start;
-        assert!(start.translation.x.abs() <= 0.003 + 1e-6 && start.translation.y.abs() <= 0.003 + 1e-6);
+        assert!(
+            start.translation.x.abs() <= 0.003 + 1e-6 && start.translation.y.abs() <= 0.003 + 1e-6
+        );
         let (axis, angle) = start.rotation.to_axis_angle();
         let yaw = angle * axis.z.signum();
         assert!(yaw.abs() <= 11.5f32.to_radians() + 1e-5, "yaw {yaw}");
@@ -81,7 +99,10 @@ fn randomization_stays_in_the_papers_ranges_and_is_off_when_disabled() {
         }
     }
     // The ranges are used, not just bounded.
-    assert!(yaw_seen > 0.15 && offset_seen > 0.015, "yaw {yaw_seen}, joint {offset_seen}");
+    assert!(
+        yaw_seen > 0.15 && offset_seen > 0.015,
+        "yaw {yaw_seen}, joint {offset_seen}"
+    );
 
     let mut env = GraspEnv::new(benchmark, SimConfig::deterministic());
     env.reset_task(2, 7).expect("reset");
@@ -108,18 +129,26 @@ fn commanded_fingers_reach_their_coupled_angles_in_free_space() {
     env.reset_task(0, 3).expect("reset"); // mug-wrap, power grasp: every finger active
     // Raise the hand clear of everything, then close the index to a PIP of 0.6 rad.
     for _ in 0..10 {
-        env.step_action(&[0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0]).expect("step");
+        env.step_action(&[0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0])
+            .expect("step");
     }
     for _ in 0..6 {
-        env.step_action(&[0.0, 0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0]).expect("step");
+        env.step_action(&[0.0, 0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0])
+            .expect("step");
     }
     for _ in 0..30 {
         env.step_action(&[0.0; 8]).expect("step");
     }
     let scene = env.scene().expect("scene");
     let links = &scene.hand.links[1];
-    let rotation = |handle: RigidBodyHandle| *scene.world.bodies.get(handle).expect("link").rotation();
-    let palm = *scene.world.bodies.get(scene.hand.palm).expect("palm").rotation();
+    let rotation =
+        |handle: RigidBodyHandle| *scene.world.bodies.get(handle).expect("link").rotation();
+    let palm = *scene
+        .world
+        .bodies
+        .get(scene.hand.palm)
+        .expect("palm")
+        .rotation();
     let mut previous = palm;
     let mut angles = Vec::new();
     for &link in links {
@@ -130,6 +159,9 @@ fn commanded_fingers_reach_their_coupled_angles_in_free_space() {
     }
     let expected = coupled_angles(1, 0.6);
     for (got, want) in angles.iter().zip(&expected) {
-        assert!((got - want).abs() < 0.03, "joint angles {angles:?}, expected {expected:?}");
+        assert!(
+            (got - want).abs() < 0.03,
+            "joint angles {angles:?}, expected {expected:?}"
+        );
     }
 }

@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::EnvArgs;
+use super::{EnvArgs, emit};
 
 #[derive(clap::Subcommand, Debug)]
 pub enum BenchCommand {
@@ -55,7 +55,9 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
 /// A random action in the union space, in environment units (metres, radians): the grasping
 /// spec's scales, so the hand moves as a policy would move it.
 fn random_action(rng: &mut ChaCha8Rng) -> Vec<f32> {
-    let mut action: Vec<f32> = (0..ACTIONS.len()).map(|_| rng.random_range(-1.0f32..=1.0)).collect();
+    let mut action: Vec<f32> = (0..ACTIONS.len())
+        .map(|_| rng.random_range(-1.0f32..=1.0))
+        .collect();
     for value in &mut action[..3] {
         *value *= 0.01;
     }
@@ -136,9 +138,8 @@ fn env(args: EnvBenchArgs) -> anyhow::Result<()> {
         episodes_one_core: episodes,
     };
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        emit(&format!("{}\n", serde_json::to_string(&report)?))
     } else {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        emit(&format!("{}\n", serde_json::to_string_pretty(&report)?))
     }
-    Ok(())
 }

@@ -7,6 +7,8 @@ pub mod tasks;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use std::io::Write;
+
 use anyhow::Context;
 use grasp_sim::{Benchmark, SimConfig};
 
@@ -47,5 +49,14 @@ impl EnvArgs {
         } else {
             SimConfig::default()
         }
+    }
+}
+
+/// Writes to standard output; a closed pipe (`crm tasks | head`) ends the output quietly.
+pub fn emit(text: &str) -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(err) if err.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
     }
 }

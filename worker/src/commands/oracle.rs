@@ -9,7 +9,9 @@ use grasp_sim::{GraspEnv, TaskChoice};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::EnvArgs;
+use std::fmt::Write;
+
+use super::{EnvArgs, emit};
 
 #[derive(clap::Args, Debug)]
 pub struct OracleArgs {
@@ -54,7 +56,11 @@ struct Report {
 fn group(episodes: &[&OracleEpisode]) -> Group {
     let wins = episodes.iter().filter(|e| e.success).count();
     Group {
-        success_rate: if episodes.is_empty() { 0.0 } else { wins as f64 / episodes.len() as f64 },
+        success_rate: if episodes.is_empty() {
+            0.0
+        } else {
+            wins as f64 / episodes.len() as f64
+        },
         episodes: episodes.len(),
     }
 }
@@ -80,7 +86,12 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
     };
     if args.trace {
         for &task in &selected {
-            trace(GraspEnv::new(benchmark.clone(), config.clone()), machine.clone(), task, args.seed)?;
+            trace(
+                GraspEnv::new(benchmark.clone(), config.clone()),
+                machine.clone(),
+                task,
+                args.seed,
+            )?;
         }
     }
     let jobs: Vec<(usize, u64)> = selected
@@ -98,7 +109,11 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
     let all: Vec<&OracleEpisode> = episodes.iter().collect();
     let mut per_objective = BTreeMap::new();
     for objective in Objective::ALL {
-        let of: Vec<_> = all.iter().copied().filter(|e| benchmark.tasks[e.task].objective == objective).collect();
+        let of: Vec<_> = all
+            .iter()
+            .copied()
+            .filter(|e| benchmark.tasks[e.task].objective == objective)
+            .collect();
         if !of.is_empty() {
             per_objective.insert(objective.name().to_string(), group(&of));
         }
@@ -112,7 +127,8 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
     for e in &episodes {
         *outcomes.entry(e.outcome.clone()).or_insert(0) += 1;
     }
-    let mean_steps = episodes.iter().map(|e| e.steps as f64).sum::<f64>() / episodes.len().max(1) as f64;
+    let mean_steps =
+        episodes.iter().map(|e| e.steps as f64).sum::<f64>() / episodes.len().max(1) as f64;
     let report = Report {
         tasks: selected.len(),
         episodes: episodes.len(),
@@ -125,18 +141,36 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         randomization: config.randomization.enabled,
     };
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        println!("oracle: {} tasks, {} episodes, success rate {:.3}, mean episode {:.1} steps ({:.2} s)", report.tasks, report.episodes, report.success_rate, report.mean_episode_steps, report.mean_episode_seconds);
+        return emit(&format!("{}\n", serde_json::to_string(&report)?));
+    }
+    let mut text = String::new();
+    {
+        writeln!(
+            text,
+            "oracle: {} tasks, {} episodes, success rate {:.3}, mean episode {:.1} steps ({:.2} s)",
+            report.tasks,
+            report.episodes,
+            report.success_rate,
+            report.mean_episode_steps,
+            report.mean_episode_seconds
+        )?;
         for (name, g) in &report.per_objective {
-            println!("  {name:<13} {:.3} over {}", g.success_rate, g.episodes);
+            writeln!(
+                text,
+                "  {name:<13} {:.3} over {}",
+                g.success_rate, g.episodes
+            )?;
         }
         for (name, g) in &report.per_task {
-            println!("  task {name:<16} {:.3} over {}", g.success_rate, g.episodes);
+            writeln!(
+                text,
+                "  task {name:<16} {:.3} over {}",
+                g.success_rate, g.episodes
+            )?;
         }
-        println!("  outcomes: {:?}", report.outcomes);
+        writeln!(text, "  outcomes: {:?}", report.outcomes)?;
     }
-    Ok(())
+    emit(&text)
 }
 
 /// A per-step trace of one episode, for tuning tasks.
@@ -154,9 +188,25 @@ fn trace(env: GraspEnv, machine: crm::Machine, task: usize, seed: u64) -> anyhow
         let p = crm_env.env().observation_parts();
         eprintln!(
             "{:>4} {:<8} rel=({:+.3},{:+.3},{:+.3}) obj=({:+.3},{:+.3},{:+.3}) n_c={:>2} grip={:.2} F=({:+.1},{:+.1},{:+.1}) cmd={:?} prog={:.2} ev={:?}",
-            crm_env.env().steps(), name, p.relative[0], p.relative[1], p.relative[2], p.object[0], p.object[1], p.object[2],
-            p.n_c, p.grip, p.force[0], p.force[1], p.force[2],
-            p.commands.iter().map(|c| (c * 100.0).round() / 100.0).collect::<Vec<_>>(), p.progress, step.event
+            crm_env.env().steps(),
+            name,
+            p.relative[0],
+            p.relative[1],
+            p.relative[2],
+            p.object[0],
+            p.object[1],
+            p.object[2],
+            p.n_c,
+            p.grip,
+            p.force[0],
+            p.force[1],
+            p.force[2],
+            p.commands
+                .iter()
+                .map(|c| (c * 100.0).round() / 100.0)
+                .collect::<Vec<_>>(),
+            p.progress,
+            step.event
         );
         if let Some(scene) = crm_env.env().scene() {
             let palm = scene.hand.palm_pose(&scene.world);
@@ -166,19 +216,50 @@ fn trace(env: GraspEnv, machine: crm::Machine, task: usize, seed: u64) -> anyhow
                     .links
                     .iter()
                     .enumerate()
-                    .find_map(|(f, links)| links.iter().position(|&l| Some(l) == point.other_body).map(|k| format!("f{f}l{k}")))
+                    .find_map(|(f, links)| {
+                        links
+                            .iter()
+                            .position(|&l| Some(l) == point.other_body)
+                            .map(|k| format!("f{f}l{k}"))
+                    })
                     .unwrap_or_else(|| "palm".into());
                 let local = palm.inverse_transform_point(point.position);
-                let v_hand = point.other_body.and_then(|b| scene.world.bodies.get(b)).map(|b| b.velocity_at_point(point.position)).unwrap_or_default();
-                let v_obj = scene.world.bodies.get(scene.object).map(|b| b.velocity_at_point(point.position)).unwrap_or_default();
+                let v_hand = point
+                    .other_body
+                    .and_then(|b| scene.world.bodies.get(b))
+                    .map(|b| b.velocity_at_point(point.position))
+                    .unwrap_or_default();
+                let v_obj = scene
+                    .world
+                    .bodies
+                    .get(scene.object)
+                    .map(|b| b.velocity_at_point(point.position))
+                    .unwrap_or_default();
                 let rel_v = v_hand - v_obj;
-                eprintln!("         v_hand-v_obj=({:+.3},{:+.3},{:+.3})", rel_v.x, rel_v.y, rel_v.z);
-                eprintln!("       {link} at hand ({:+.3},{:+.3},{:+.3}) Fn={:.1} Ft={:.1} F=({:+.1},{:+.1},{:+.1})", local.x, local.y, local.z, point.normal_force, point.friction_force, point.force.x, point.force.y, point.force.z);
+                eprintln!(
+                    "         v_hand-v_obj=({:+.3},{:+.3},{:+.3})",
+                    rel_v.x, rel_v.y, rel_v.z
+                );
+                eprintln!(
+                    "       {link} at hand ({:+.3},{:+.3},{:+.3}) Fn={:.1} Ft={:.1} F=({:+.1},{:+.1},{:+.1})",
+                    local.x,
+                    local.y,
+                    local.z,
+                    point.normal_force,
+                    point.friction_force,
+                    point.force.x,
+                    point.force.y,
+                    point.force.z
+                );
             }
         }
         stage = step.stage;
         if step.done || step.truncated {
-            eprintln!("# end: {} (fail cause {:?})", crm_env.machine().stage_name(stage), crm_env.env().last_fail());
+            eprintln!(
+                "# end: {} (fail cause {:?})",
+                crm_env.machine().stage_name(stage),
+                crm_env.env().last_fail()
+            );
             return Ok(());
         }
     }

@@ -2,7 +2,9 @@
 
 use grasp_sim::benchmark::{OBJECT_FEATURES, Objective, Topology};
 
-use super::EnvArgs;
+use std::fmt::Write;
+
+use super::{EnvArgs, emit};
 
 #[derive(clap::Args, Debug)]
 pub struct TasksArgs {
@@ -44,41 +46,70 @@ pub fn run(args: TasksArgs) -> anyhow::Result<()> {
             "objects": objects,
             "tasks": benchmark.tasks,
         });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
+        return emit(&format!("{}\n", serde_json::to_string_pretty(&out)?));
     }
-    println!("{} objects, {} objectives, {} topologies, {} tasks", benchmark.objects.len(), Objective::ALL.len(), Topology::ALL.len(), benchmark.tasks.len());
-    println!();
-    println!("{:<14} {:>7} {:>6} {:<8} {:>22}", "object", "mass kg", "mu", "fragile", "size x*y*z cm");
+    let mut text = String::new();
+    writeln!(
+        text,
+        "{} objects, {} objectives, {} topologies, {} tasks",
+        benchmark.objects.len(),
+        Objective::ALL.len(),
+        Topology::ALL.len(),
+        benchmark.tasks.len()
+    )?;
+    writeln!(text)?;
+    writeln!(
+        text,
+        "{:<14} {:>7} {:>6} {:<8} {:>22}",
+        "object", "mass kg", "mu", "fragile", "size x*y*z cm"
+    )?;
     for object in &benchmark.objects {
         let d = object.dimensions();
-        println!(
+        writeln!(
+            text,
             "{:<14} {:>7.2} {:>6.2} {:<8} {:>22}",
             object.name,
             object.mass,
             object.friction,
             object.fragility.name(),
-            format!("{:.1}*{:.1}*{:.1}", d[0] * 100.0, d[1] * 100.0, d[2] * 100.0)
-        );
+            format!(
+                "{:.1}*{:.1}*{:.1}",
+                d[0] * 100.0,
+                d[1] * 100.0,
+                d[2] * 100.0
+            )
+        )?;
     }
-    println!();
-    println!("{:<16} {:<12} {:<13} {:<9} {:>24}", "task", "object", "objective", "topology", "grasp offset cm");
+    writeln!(text)?;
+    writeln!(
+        text,
+        "{:<16} {:<12} {:<13} {:<9} {:>24}",
+        "task", "object", "objective", "topology", "grasp offset cm"
+    )?;
     for task in &benchmark.tasks {
         let o = task.grasp.offset;
-        println!(
+        writeln!(
+            text,
             "{:<16} {:<12} {:<13} {:<9} {:>24}",
             task.id,
             task.object,
             task.objective.name(),
             task.topology.name(),
-            format!("({:.1}, {:.1}, {:.1})", o[0] * 100.0, o[1] * 100.0, o[2] * 100.0)
-        );
+            format!(
+                "({:.1}, {:.1}, {:.1})",
+                o[0] * 100.0,
+                o[1] * 100.0,
+                o[2] * 100.0
+            )
+        )?;
     }
-    Ok(())
+    emit(&text)
 }
 
 pub fn run_spec(args: SpecArgs) -> anyhow::Result<()> {
     let machine = args.env.machine()?;
-    println!("{}", serde_json::to_string_pretty(machine.spec())?);
-    Ok(())
+    emit(&format!(
+        "{}\n",
+        serde_json::to_string_pretty(machine.spec())?
+    ))
 }

@@ -26,6 +26,7 @@ pub const TOY_SPEC: &str = r#"{
   ]
 }"#;
 
+#[allow(dead_code)] // Not every test file uses it.
 pub fn toy_machine() -> crm::Machine {
     let spec = crm::Spec::from_json(TOY_SPEC, "toy").expect("toy spec parses");
     crm::Machine::from_spec(spec).expect("toy spec is valid")

@@ -79,24 +79,41 @@ impl Benchmark {
                 return Err(invalid(at, "duplicate object name".into()));
             }
             if !(object.mass.is_finite() && object.mass > 0.0) {
-                return Err(invalid(format!("{at}.mass"), format!("must be positive, got {}", object.mass)));
+                return Err(invalid(
+                    format!("{at}.mass"),
+                    format!("must be positive, got {}", object.mass),
+                ));
             }
             if !(object.friction.is_finite() && (0.0..=2.0).contains(&object.friction)) {
-                return Err(invalid(format!("{at}.friction"), format!("must be in [0, 2], got {}", object.friction)));
+                return Err(invalid(
+                    format!("{at}.friction"),
+                    format!("must be in [0, 2], got {}", object.friction),
+                ));
             }
             if object.parts.is_empty() {
-                return Err(invalid(format!("{at}.parts"), "an object needs at least one part".into()));
+                return Err(invalid(
+                    format!("{at}.parts"),
+                    "an object needs at least one part".into(),
+                ));
             }
             for (k, part) in object.parts.iter().enumerate() {
                 let dims = part.shape.dimensions();
-                if dims.iter().any(|d| !(d.is_finite() && *d > 0.0)) || part.pos.iter().any(|p| !p.is_finite()) {
-                    return Err(invalid(format!("{at}.parts[{k}]"), "sizes must be positive and positions finite".into()));
+                if dims.iter().any(|d| !(d.is_finite() && *d > 0.0))
+                    || part.pos.iter().any(|p| !p.is_finite())
+                {
+                    return Err(invalid(
+                        format!("{at}.parts[{k}]"),
+                        "sizes must be positive and positions finite".into(),
+                    ));
                 }
             }
-            if let Some(anchor) = &object.anchor {
-                if !(anchor.resist_torque.is_finite() && anchor.resist_torque > 0.0) {
-                    return Err(invalid(format!("{at}.anchor.resist_torque"), "must be positive".into()));
-                }
+            if let Some(anchor) = &object.anchor
+                && !(anchor.resist_torque.is_finite() && anchor.resist_torque > 0.0)
+            {
+                return Err(invalid(
+                    format!("{at}.anchor.resist_torque"),
+                    "must be positive".into(),
+                ));
             }
         }
         let mut ids = BTreeSet::new();
@@ -106,26 +123,57 @@ impl Benchmark {
                 return Err(invalid(at, "duplicate task id".into()));
             }
             let Some(object) = self.object(&task.object) else {
-                return Err(invalid(format!("{at}.object"), format!("unknown object {:?}", task.object)));
+                return Err(invalid(
+                    format!("{at}.object"),
+                    format!("unknown object {:?}", task.object),
+                ));
             };
-            if task.grasp.offset.iter().chain(&task.motion).any(|v| !v.is_finite()) || !task.grasp.yaw.is_finite() {
-                return Err(invalid(format!("{at}.grasp"), "values must be finite".into()));
+            if task
+                .grasp
+                .offset
+                .iter()
+                .chain(&task.motion)
+                .any(|v| !v.is_finite())
+                || !task.grasp.yaw.is_finite()
+            {
+                return Err(invalid(
+                    format!("{at}.grasp"),
+                    "values must be finite".into(),
+                ));
             }
             let needs_required = matches!(task.objective, Objective::Twist | Objective::Press);
             match (needs_required, task.required) {
                 (true, None) => {
-                    return Err(invalid(format!("{at}.required"), format!("a {} task needs a required torque or force", task.objective.name())));
+                    return Err(invalid(
+                        format!("{at}.required"),
+                        format!(
+                            "a {} task needs a required torque or force",
+                            task.objective.name()
+                        ),
+                    ));
                 }
                 (true, Some(value)) if !(value.is_finite() && value != 0.0) => {
-                    return Err(invalid(format!("{at}.required"), "must be finite and non-zero".into()));
+                    return Err(invalid(
+                        format!("{at}.required"),
+                        "must be finite and non-zero".into(),
+                    ));
                 }
                 _ => {}
             }
             if task.objective == Objective::Twist && object.anchor.is_none() {
-                return Err(invalid(format!("{at}.objective"), format!("twist needs an anchored object, {} has no anchor", object.name)));
+                return Err(invalid(
+                    format!("{at}.objective"),
+                    format!(
+                        "twist needs an anchored object, {} has no anchor",
+                        object.name
+                    ),
+                ));
             }
             if task.objective != Objective::Twist && object.anchor.is_some() {
-                return Err(invalid(format!("{at}.objective"), format!("{} is anchored and only takes twist tasks", object.name)));
+                return Err(invalid(
+                    format!("{at}.objective"),
+                    format!("{} is anchored and only takes twist tasks", object.name),
+                ));
             }
         }
         Ok(())

@@ -149,7 +149,15 @@ pub struct Object {
 
 /// Names of [`Object::features`], in order.
 pub const OBJECT_FEATURES: [&str; 10] = [
-    "size_x", "size_y", "size_z", "mass", "friction", "fragility", "handle", "round", "elongated",
+    "size_x",
+    "size_y",
+    "size_z",
+    "mass",
+    "friction",
+    "fragility",
+    "handle",
+    "round",
+    "elongated",
     "button",
 ];
 

@@ -1,0 +1,59 @@
+//! The `crm` binary as a user runs it: JSON reports and clear refusals with exit code 2.
+
+use std::process::Command;
+
+fn crm(args: &[&str]) -> (i32, String, String) {
+    let output = Command::new(env!("CARGO_BIN_EXE_crm")).args(args).output().expect("crm runs");
+    (
+        output.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&output.stdout).into_owned(),
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn oracle_json_reports_the_issue_fields() {
+    let (code, stdout, stderr) = crm(&["oracle", "--json", "--seeds", "1", "--task", "mouse-press", "--task", "faucet-twist"]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    assert_eq!(report["tasks"], 2);
+    assert_eq!(report["episodes"], 2);
+    let rate = report["success_rate"].as_f64().expect("success_rate");
+    assert!((0.0..=1.0).contains(&rate));
+    assert!(report["per_objective"]["press"]["episodes"] == 1);
+    assert!(report["per_objective"]["twist"]["success_rate"].is_number());
+    assert!(report["mean_episode_steps"].as_f64().expect("steps") > 0.0);
+}
+
+#[test]
+fn tasks_json_lists_the_whole_benchmark() {
+    let (code, stdout, _) = crm(&["tasks", "--json"]);
+    assert_eq!(code, 0);
+    let listing: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert_eq!(listing["objects"].as_array().map(Vec::len), Some(20));
+    assert_eq!(listing["tasks"].as_array().map(Vec::len), Some(26));
+    assert_eq!(listing["objectives"].as_array().map(Vec::len), Some(7));
+    assert_eq!(listing["topologies"].as_array().map(Vec::len), Some(6));
+}
+
+#[test]
+fn bad_input_is_refused_with_a_message_and_exit_code_2() {
+    let (code, _, stderr) = crm(&["oracle", "--task", "teapot-lift"]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("unknown task \"teapot-lift\""), "{stderr}");
+
+    let dir = std::env::temp_dir().join(format!("crm-cli-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let spec = dir.join("spec.json");
+    std::fs::write(&spec, "{\"name\": \"x\", \"features\": [}").expect("write");
+    let (code, _, stderr) = crm(&["oracle", "--spec", spec.to_str().expect("utf-8 path")]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("spec.json") && stderr.contains("line 1"), "{stderr}");
+
+    let benchmark = dir.join("benchmark.json");
+    std::fs::write(&benchmark, "{\"objects\": [], \"tasks\": [{\"id\": \"a\"}]}").expect("write");
+    let (code, _, stderr) = crm(&["tasks", "--benchmark", benchmark.to_str().expect("utf-8 path")]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("benchmark.json"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
