@@ -3,7 +3,10 @@
 use std::process::Command;
 
 fn crm(args: &[&str]) -> (i32, String, String) {
-    let output = Command::new(env!("CARGO_BIN_EXE_crm")).args(args).output().expect("crm runs");
+    let output = Command::new(env!("CARGO_BIN_EXE_crm"))
+        .args(args)
+        .output()
+        .expect("crm runs");
     (
         output.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&output.stdout).into_owned(),
@@ -13,7 +16,16 @@ fn crm(args: &[&str]) -> (i32, String, String) {
 
 #[test]
 fn oracle_json_reports_the_issue_fields() {
-    let (code, stdout, stderr) = crm(&["oracle", "--json", "--seeds", "1", "--task", "mouse-press", "--task", "faucet-twist"]);
+    let (code, stdout, stderr) = crm(&[
+        "oracle",
+        "--json",
+        "--seeds",
+        "1",
+        "--task",
+        "mouse-press",
+        "--task",
+        "faucet-twist",
+    ]);
     assert_eq!(code, 0, "{stderr}");
     let report: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
     assert_eq!(report["tasks"], 2);
@@ -48,11 +60,22 @@ fn bad_input_is_refused_with_a_message_and_exit_code_2() {
     std::fs::write(&spec, "{\"name\": \"x\", \"features\": [}").expect("write");
     let (code, _, stderr) = crm(&["oracle", "--spec", spec.to_str().expect("utf-8 path")]);
     assert_eq!(code, 2);
-    assert!(stderr.contains("spec.json") && stderr.contains("line 1"), "{stderr}");
+    assert!(
+        stderr.contains("spec.json") && stderr.contains("line 1"),
+        "{stderr}"
+    );
 
     let benchmark = dir.join("benchmark.json");
-    std::fs::write(&benchmark, "{\"objects\": [], \"tasks\": [{\"id\": \"a\"}]}").expect("write");
-    let (code, _, stderr) = crm(&["tasks", "--benchmark", benchmark.to_str().expect("utf-8 path")]);
+    std::fs::write(
+        &benchmark,
+        "{\"objects\": [], \"tasks\": [{\"id\": \"a\"}]}",
+    )
+    .expect("write");
+    let (code, _, stderr) = crm(&[
+        "tasks",
+        "--benchmark",
+        benchmark.to_str().expect("utf-8 path"),
+    ]);
     assert_eq!(code, 2);
     assert!(stderr.contains("benchmark.json"), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();

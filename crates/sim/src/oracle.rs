@@ -111,13 +111,12 @@ impl Oracle {
                     }
                     // Close fast until the first touch, then slowly so the grip does not
                     // overshoot.
-                    let rate = 1.0;
                     action[3 + finger] = if grip >= wanted_grip {
                         0.0
                     } else if parts.n_c == 0 {
-                        rate
+                        1.0
                     } else {
-                        0.3 * rate
+                        0.3
                     };
                 }
                 if grip >= wanted_grip || all_closed {
@@ -191,6 +190,8 @@ pub struct OracleEpisode {
     pub steps: usize,
     /// The terminal stage reached, or `truncated`.
     pub outcome: String,
+    /// Why the grasp failed, when it did.
+    pub fail_cause: Option<crate::events::FailCause>,
 }
 
 /// Runs one oracle episode of `task` with `seed` through the grasping machine.
@@ -224,6 +225,11 @@ pub fn run_episode(
         seed,
         success: outcome == "success",
         steps,
+        fail_cause: if outcome == "failure" {
+            crm_env.env().last_fail()
+        } else {
+            None
+        },
         outcome,
     };
     let (_, env) = crm_env.into_parts();

@@ -125,7 +125,11 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         per_task.insert(benchmark.tasks[task].id.clone(), group(&of));
     }
     for e in &episodes {
-        *outcomes.entry(e.outcome.clone()).or_insert(0) += 1;
+        let key = match e.fail_cause {
+            Some(cause) => format!("{} ({})", e.outcome, format!("{cause:?}").to_lowercase()),
+            None => e.outcome.clone(),
+        };
+        *outcomes.entry(key).or_insert(0) += 1;
     }
     let mean_steps =
         episodes.iter().map(|e| e.steps as f64).sum::<f64>() / episodes.len().max(1) as f64;
