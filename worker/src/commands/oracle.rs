@@ -228,22 +228,6 @@ fn trace(env: GraspEnv, machine: crm::Machine, task: usize, seed: u64) -> anyhow
                     })
                     .unwrap_or_else(|| "palm".into());
                 let local = palm.inverse_transform_point(point.position);
-                let v_hand = point
-                    .other_body
-                    .and_then(|b| scene.world.bodies.get(b))
-                    .map(|b| b.velocity_at_point(point.position))
-                    .unwrap_or_default();
-                let v_obj = scene
-                    .world
-                    .bodies
-                    .get(scene.object)
-                    .map(|b| b.velocity_at_point(point.position))
-                    .unwrap_or_default();
-                let rel_v = v_hand - v_obj;
-                eprintln!(
-                    "         v_hand-v_obj=({:+.3},{:+.3},{:+.3})",
-                    rel_v.x, rel_v.y, rel_v.z
-                );
                 eprintln!(
                     "       {link} at hand ({:+.3},{:+.3},{:+.3}) Fn={:.1} Ft={:.1} F=({:+.1},{:+.1},{:+.1})",
                     local.x,
