@@ -133,7 +133,7 @@ impl Topology {
             Topology::PPdAb2 => [thumb, closing, IDLE, IDLE, IDLE],
             Topology::PPdAb23 => [thumb, closing, closing, IDLE, IDLE],
             // The side of the curled index against a partly closed thumb.
-            Topology::InSiAd2 => [finger(true, 0.0, 1.4), closing, IDLE, IDLE, IDLE],
+            Topology::InSiAd2 => [finger(true, 0.0, 1.9), finger(true, 0.0, 1.7), IDLE, IDLE, IDLE],
         }
     }
 }
