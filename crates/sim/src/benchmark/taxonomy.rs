@@ -132,8 +132,10 @@ impl Topology {
             Topology::PoPmAb25 | Topology::PPdAb25 => [thumb, closing, closing, closing, closing],
             Topology::PPdAb2 => [thumb, closing, IDLE, IDLE, IDLE],
             Topology::PPdAb23 => [thumb, closing, closing, IDLE, IDLE],
-            // The side of the curled index against a partly closed thumb.
-            Topology::InSiAd2 => [finger(true, 0.0, 1.9), finger(true, 0.0, 1.7), IDLE, IDLE, IDLE],
+            // The thumb against the fully curled index. Without thumb rotation or finger
+            // abduction in the hand model, this differs from pPdAb2 only in how far the index
+            // curls.
+            Topology::InSiAd2 => [thumb, finger(true, 0.0, 1.7), IDLE, IDLE, IDLE],
         }
     }
 }
