@@ -17,8 +17,8 @@ use super::{EnvArgs, emit};
 pub struct OracleArgs {
     #[command(flatten)]
     pub env: EnvArgs,
-    /// Seeds per task.
-    #[arg(long, default_value_t = 5)]
+    /// Seeds per task (episodes = tasks x seeds).
+    #[arg(long, default_value_t = 10)]
     pub seeds: u64,
     /// First seed.
     #[arg(long, default_value_t = 0)]
