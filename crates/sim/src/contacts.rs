@@ -18,6 +18,8 @@ pub struct ContactPoint {
     pub normal_force: f32,
     /// Friction force magnitude (N).
     pub friction_force: f32,
+    /// Friction force on the object (N, world).
+    pub friction_vector: Vec3,
     /// Friction coefficient of the pair.
     pub friction: f32,
     /// The body of the other collider (a hand link, or `None` for the table).
@@ -42,14 +44,34 @@ impl ContactMetrics {
         self.points.len()
     }
 
-    /// `o_cone`: there is contact and every contact sticks inside the friction cone with the
-    /// margin.
+    /// `o_cone`: there is contact and every contact sticks inside its friction cone with the
+    /// margin. A contact is one body touching the object (a finger link, the palm, the table):
+    /// rapier splits such a patch into several points and may saturate friction at a lightly
+    /// loaded one while the patch as a whole sticks, so the test sums each patch's normal
+    /// forces and friction vectors: `|sum F_t| <= (1 - margin) mu sum F_n`.
     pub fn in_cone(&self, margin: f32) -> bool {
-        !self.points.is_empty()
-            && self
-                .points
+        let mut patches: Vec<(Option<RigidBodyHandle>, f32, Vec3, f32)> = Vec::new();
+        for point in &self.points {
+            match patches
+                .iter_mut()
+                .find(|(body, ..)| *body == point.other_body)
+            {
+                Some((_, normal, friction, _)) => {
+                    *normal += point.normal_force;
+                    *friction += point.friction_vector;
+                }
+                None => patches.push((
+                    point.other_body,
+                    point.normal_force,
+                    point.friction_vector,
+                    point.friction,
+                )),
+            }
+        }
+        !patches.is_empty()
+            && patches
                 .iter()
-                .all(|p| p.friction_force <= (1.0 - margin) * p.friction * p.normal_force)
+                .all(|(_, normal, friction, mu)| friction.length() <= (1.0 - margin) * mu * normal)
     }
 
     /// Torque of the contact forces about an axis through `pivot` (N m).
@@ -102,14 +124,16 @@ pub fn object_contacts(
                 let friction_force = point.data.tangent_impulse.norm() / dt;
                 let friction_dir = point.data.warmstart_tangent_world.normalize_or_zero();
                 // Forces on collider 1's body: the normal pushes it back along -n.
-                let on_first = -manifold.data.normal * normal_force + friction_dir * friction_force;
-                let force = if object_first { on_first } else { -on_first };
+                let sign = if object_first { 1.0 } else { -1.0 };
+                let friction_vector = sign * friction_dir * friction_force;
+                let force = sign * -manifold.data.normal * normal_force + friction_vector;
                 let position = c1.position().transform_point(point.local_p1);
                 metrics.points.push(ContactPoint {
                     position,
                     force,
                     normal_force,
                     friction_force,
+                    friction_vector,
                     friction: manifold.data.friction,
                     other_body: other.parent(),
                 });

@@ -191,7 +191,7 @@ fn trace(env: GraspEnv, machine: crm::Machine, task: usize, seed: u64) -> anyhow
         let step = crm_env.step(&action)?;
         let p = crm_env.env().observation_parts();
         eprintln!(
-            "{:>4} {:<8} rel=({:+.3},{:+.3},{:+.3}) obj=({:+.3},{:+.3},{:+.3}) n_c={:>2} grip={:.2} F=({:+.1},{:+.1},{:+.1}) cmd={:?} prog={:.2} ev={:?}",
+            "{:>4} {:<8} rel=({:+.3},{:+.3},{:+.3}) obj=({:+.3},{:+.3},{:+.3}) n_c={:>2} grip={:.2} F=({:+.1},{:+.1},{:+.1}) cmd={:?} cone={} prog={:.2} r=({:+.2},{:+.1}) ev={:?}",
             crm_env.env().steps(),
             name,
             p.relative[0],
@@ -209,7 +209,10 @@ fn trace(env: GraspEnv, machine: crm::Machine, task: usize, seed: u64) -> anyhow
                 .iter()
                 .map(|c| (c * 100.0).round() / 100.0)
                 .collect::<Vec<_>>(),
+            u8::from(p.cone),
             p.progress,
+            step.intra_reward,
+            step.transition_reward,
             step.event
         );
         if let Some(scene) = crm_env.env().scene() {
