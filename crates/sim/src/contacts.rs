@@ -47,10 +47,11 @@ impl ContactMetrics {
     /// `o_cone`: there is contact and every contact sticks inside its friction cone with the
     /// margin. A contact is one body touching the object (a finger link, the palm, the table):
     /// rapier splits such a patch into several points and may saturate friction at a lightly
-    /// loaded one while the patch as a whole sticks, so the test sums each patch's normal
-    /// forces and friction vectors: `|sum F_t| <= (1 - margin) mu sum F_n`.
+    /// loaded one while the patch holds, so each patch is tested with its points' forces
+    /// added up: `sum |F_t| <= (1 - margin) mu sum F_n`. (Adding the friction vectors instead
+    /// would be fooled by the solver's lateral components, which cancel between points.)
     pub fn in_cone(&self, margin: f32) -> bool {
-        let mut patches: Vec<(Option<RigidBodyHandle>, f32, Vec3, f32)> = Vec::new();
+        let mut patches: Vec<(Option<RigidBodyHandle>, f32, f32, f32)> = Vec::new();
         for point in &self.points {
             match patches
                 .iter_mut()
@@ -58,12 +59,12 @@ impl ContactMetrics {
             {
                 Some((_, normal, friction, _)) => {
                     *normal += point.normal_force;
-                    *friction += point.friction_vector;
+                    *friction += point.friction_force;
                 }
                 None => patches.push((
                     point.other_body,
                     point.normal_force,
-                    point.friction_vector,
+                    point.friction_force,
                     point.friction,
                 )),
             }
@@ -71,7 +72,7 @@ impl ContactMetrics {
         !patches.is_empty()
             && patches
                 .iter()
-                .all(|(_, normal, friction, mu)| friction.length() <= (1.0 - margin) * mu * normal)
+                .all(|&(_, normal, friction, mu)| friction <= (1.0 - margin) * mu * normal)
     }
 
     /// Torque of the contact forces about an axis through `pivot` (N m).
