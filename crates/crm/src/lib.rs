@@ -9,6 +9,32 @@
 //! advantage of section III-B exactly. [`Episode`] keeps the transition history `H`.
 //!
 //! The crate does no I/O beyond reading a spec file and never links an async runtime.
+//!
+//! ```
+//! let spec = crm::Spec::from_json(r#"{
+//!   "name": "reach", "features": ["dist"], "action_dims": ["dx"],
+//!   "events": ["arrive", "lost"], "initial": "approach",
+//!   "stages": [
+//!     {"name": "approach", "actions": [{"dim": "dx", "scale": 0.01}], "abstraction": ["dist"],
+//!      "reward": [{"kind": "neg_exp_norm", "features": ["dist"]}]},
+//!     {"name": "done", "terminal": true},
+//!     {"name": "failed", "terminal": true}
+//!   ],
+//!   "transitions": [
+//!     {"from": "approach", "event": "arrive", "to": "done", "reward": 10.0},
+//!     {"from": "approach", "event": "lost", "to": "failed", "reward": -10.0}
+//!   ]
+//! }"#, "inline")?;
+//! let machine = crm::Machine::from_spec(spec)?;
+//! let mut episode = crm::Episode::new(&machine);
+//! let arrive = machine.event_id("arrive").expect("declared");
+//! let step = episode.advance(&machine, &[0.0], &[arrive])?;
+//! assert_eq!(machine.stage_name(step.next), "done");
+//! assert_eq!((step.intra_reward, step.transition_reward), (-1.0, 10.0));
+//! assert!(step.done);
+//! assert_eq!(episode.total_return(), 9.0);
+//! # Ok::<(), crm::Error>(())
+//! ```
 
 mod env;
 mod episode;

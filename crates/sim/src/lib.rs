@@ -2,6 +2,24 @@
 //! paper's joint coupling, the benchmark's objects and tasks, the observation vector from real
 //! contact impulses, the CRM events with per-objective success tests, and domain randomization,
 //! all from one seed per episode. Synchronous, no I/O beyond reading data files.
+//!
+//! ```
+//! use std::sync::Arc;
+//! use grasp_sim::{Benchmark, GraspEnv, SimConfig, TaskChoice};
+//!
+//! let benchmark = Arc::new(Benchmark::builtin());
+//! let mut env = GraspEnv::new(benchmark, SimConfig::default());
+//! env.set_task_choice(TaskChoice::Fixed(0))?;
+//! let machine = grasp_sim::spec::grasping_machine();
+//! let mut episode = crm::CrmEnv::new(machine, env, crm::RewardMode::Crm);
+//! let (stage, state) = episode.reset(7)?;
+//! assert_eq!(episode.machine().stage_name(stage), "approach");
+//! // The approach stage sees 8 features and moves the palm along x, y and z.
+//! assert_eq!(state.len(), 8);
+//! let step = episode.step(&[0.0, 0.0, -1.0])?;
+//! assert!(step.intra_reward < 0.0 && !step.done);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 pub mod benchmark;
 pub mod config;
