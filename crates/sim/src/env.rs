@@ -152,7 +152,7 @@ impl GraspEnv {
         self.steps = 0;
         self.last_fail = None;
         self.hand_contacts = ContactMetrics::default();
-        self.observe(&ContactMetrics::default(), 1)?;
+        self.observe(&ContactMetrics::default())?;
         Ok(self.parts.to_vec())
     }
 
@@ -242,7 +242,7 @@ impl GraspEnv {
         last.torque = averaged.torque;
         last.grip = averaged.grip;
         self.steps += 1;
-        let events = self.observe(&last, substeps)?;
+        let events = self.observe(&last)?;
         self.hand_contacts = last;
         Ok(crm::EnvStep {
             observation: self.parts.to_vec(),
@@ -252,11 +252,7 @@ impl GraspEnv {
     }
 
     /// Computes the observation parts and the events from the world's current state.
-    fn observe(
-        &mut self,
-        contacts: &ContactMetrics,
-        _substeps: usize,
-    ) -> Result<Vec<&'static str>> {
+    fn observe(&mut self, contacts: &ContactMetrics) -> Result<Vec<&'static str>> {
         let scene = self.scene.as_ref().ok_or(Error::NotReset)?;
         let task = &self.benchmark.tasks[self.task_index];
         let object = self.benchmark.object_of(task);

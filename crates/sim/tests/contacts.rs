@@ -20,10 +20,25 @@ fn box_scene(height: f32) -> BoxScene {
 
 /// `box_first` inserts the box before the table, which swaps the colliders' order in rapier's
 /// contact pairs: the metrics must not depend on it.
-fn box_scene_ordered(height: f32, box_first: bool) -> BoxScene {
+/// An empty world with the environment's gravity and solver parameters.
+fn world() -> PhysicsWorld {
     let mut world = PhysicsWorld::new();
     world.gravity = Vec3::new(0.0, 0.0, -9.81);
     world.integration_parameters = integration_parameters(&SimConfig::deterministic());
+    world
+}
+
+fn insert_table(world: &mut PhysicsWorld, friction: f32) {
+    world.insert_collider(
+        ColliderBuilder::cuboid(TABLE_HALF[0], TABLE_HALF[1], TABLE_HALF[2])
+            .translation(Vec3::new(0.0, 0.0, -TABLE_HALF[2]))
+            .friction(friction),
+        None,
+    );
+}
+
+fn box_scene_ordered(height: f32, box_first: bool) -> BoxScene {
+    let mut world = world();
     let early = if box_first {
         Some(
             world.insert(
@@ -36,12 +51,7 @@ fn box_scene_ordered(height: f32, box_first: bool) -> BoxScene {
     } else {
         None
     };
-    world.insert_collider(
-        ColliderBuilder::cuboid(TABLE_HALF[0], TABLE_HALF[1], TABLE_HALF[2])
-            .translation(Vec3::new(0.0, 0.0, -TABLE_HALF[2]))
-            .friction(0.6),
-        None,
-    );
+    insert_table(&mut world, 0.6);
     let (body, _) = match early {
         Some(handles) => handles,
         None => world.insert(
@@ -182,9 +192,7 @@ fn a_sliding_box_is_outside_the_cone() {
 #[test]
 fn friction_between_two_dynamic_bodies_opposes_the_push() {
     for top_first in [false, true] {
-        let mut world = PhysicsWorld::new();
-        world.gravity = Vec3::new(0.0, 0.0, -9.81);
-        world.integration_parameters = integration_parameters(&SimConfig::deterministic());
+        let mut world = world();
         let top_body = RigidBodyBuilder::dynamic().translation(Vec3::new(0.0, 0.0, 3.0 * HALF));
         let top_collider = ColliderBuilder::cuboid(HALF, HALF, HALF)
             .mass(MASS)
@@ -194,12 +202,7 @@ fn friction_between_two_dynamic_bodies_opposes_the_push() {
         } else {
             None
         };
-        world.insert_collider(
-            ColliderBuilder::cuboid(TABLE_HALF[0], TABLE_HALF[1], TABLE_HALF[2])
-                .translation(Vec3::new(0.0, 0.0, -TABLE_HALF[2]))
-                .friction(1.0),
-            None,
-        );
+        insert_table(&mut world, 1.0);
         let (bottom, _) = world.insert(
             RigidBodyBuilder::dynamic().translation(Vec3::new(0.0, 0.0, HALF)),
             ColliderBuilder::cuboid(2.0 * HALF, 2.0 * HALF, HALF)
