@@ -1,0 +1,236 @@
+//! Checkpoints: the networks' tensors in one safetensors file whose metadata carries a JSON
+//! header (algorithm, CRM spec hash, environment version, seed, steps, network layout,
+//! config). Loading refuses a file that is not a checkpoint, or one made for another spec or
+//! environment version, and says which.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::network::{ActorCritic, Layout};
+
+/// Format tag in every header.
+pub const FORMAT: &str = "crm-grasp-checkpoint/1";
+const HEADER_KEY: &str = "crm_grasp";
+
+/// What a checkpoint says about itself.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CheckpointHeader {
+    pub format: String,
+    /// `crm-ppo`, `ippo`, `lppo`, `crm-sac` or `ppo`.
+    pub algorithm: String,
+    /// [`crm::Spec::hash`] of the machine it was trained in.
+    pub spec_hash: String,
+    /// The environment's version string (`grasp_sim::ENV_VERSION`).
+    pub env_version: String,
+    pub seed: u64,
+    /// Environment steps trained.
+    pub steps: u64,
+    pub layout: Layout,
+    pub hidden: Vec<usize>,
+    /// The training configuration as JSON.
+    pub config: serde_json::Value,
+}
+
+/// Saving and loading checkpoints.
+pub struct Checkpoint;
+
+fn refuse(path: &Path, message: impl Into<String>) -> Error {
+    Error::Checkpoint {
+        path: path.display().to_string(),
+        message: message.into(),
+    }
+}
+
+impl Checkpoint {
+    /// Writes the networks and the header to `path`.
+    pub fn save(net: &ActorCritic, header: &CheckpointHeader, path: &Path) -> Result<()> {
+        let json = serde_json::to_string(header)
+            .map_err(|e| refuse(path, format!("cannot encode header: {e}")))?;
+        let metadata = HashMap::from([(HEADER_KEY.to_string(), json)]);
+        let tensors: Vec<(&str, &candle_core::Tensor)> = net
+            .params()
+            .iter()
+            .map(|(name, var)| (name.as_str(), var.as_tensor()))
+            .collect();
+        safetensors::serialize_to_file(tensors, Some(metadata), path)
+            .map_err(|e| refuse(path, format!("cannot write: {e}")))
+    }
+
+    /// Reads only the header.
+    pub fn read_header(path: &Path) -> Result<CheckpointHeader> {
+        let bytes = std::fs::read(path).map_err(|e| refuse(path, format!("cannot read: {e}")))?;
+        Self::header_of(&bytes, path)
+    }
+
+    fn header_of(bytes: &[u8], path: &Path) -> Result<CheckpointHeader> {
+        let (_, metadata) = safetensors::SafeTensors::read_metadata(bytes)
+            .map_err(|e| refuse(path, format!("not a safetensors file ({e})")))?;
+        let json = metadata
+            .metadata()
+            .as_ref()
+            .and_then(|m| m.get(HEADER_KEY))
+            .ok_or_else(|| refuse(path, "a safetensors file without a crm-grasp header"))?;
+        let header: CheckpointHeader = serde_json::from_str(json)
+            .map_err(|e| refuse(path, format!("malformed header: {e}")))?;
+        if header.format != FORMAT {
+            return Err(refuse(
+                path,
+                format!("format {:?}, this build reads {FORMAT:?}", header.format),
+            ));
+        }
+        Ok(header)
+    }
+
+    /// Loads a checkpoint made for this machine (`spec_hash`) and environment version.
+    pub fn load(
+        path: &Path,
+        spec_hash: &str,
+        env_version: &str,
+    ) -> Result<(ActorCritic, CheckpointHeader)> {
+        let bytes = std::fs::read(path).map_err(|e| refuse(path, format!("cannot read: {e}")))?;
+        let header = Self::header_of(&bytes, path)?;
+        if header.spec_hash != spec_hash {
+            return Err(refuse(
+                path,
+                format!(
+                    "trained with crm spec {}, this machine's spec is {spec_hash}",
+                    header.spec_hash
+                ),
+            ));
+        }
+        if header.env_version != env_version {
+            return Err(refuse(
+                path,
+                format!(
+                    "trained in environment {}, this is {env_version}",
+                    header.env_version
+                ),
+            ));
+        }
+        let net = ActorCritic::new(header.layout, &header.hidden, 0)?;
+        let tensors = candle_core::safetensors::load_buffer(&bytes, net.device())
+            .map_err(|e| refuse(path, format!("cannot read tensors: {e}")))?;
+        for (name, var) in net.params() {
+            let tensor = tensors
+                .get(name)
+                .ok_or_else(|| refuse(path, format!("missing tensor {name}")))?;
+            if tensor.shape() != var.shape() {
+                return Err(refuse(
+                    path,
+                    format!(
+                        "tensor {name} has shape {:?}, expected {:?}",
+                        tensor.shape(),
+                        var.shape()
+                    ),
+                ));
+            }
+            var.set(tensor)?;
+        }
+        Ok((net, header))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn header(net: &ActorCritic) -> CheckpointHeader {
+        CheckpointHeader {
+            format: FORMAT.into(),
+            algorithm: "crm-ppo".into(),
+            spec_hash: "abc123".into(),
+            env_version: "grasp-sim/test".into(),
+            seed: 5,
+            steps: 1000,
+            layout: net.layout(),
+            hidden: net.hidden().to_vec(),
+            config: serde_json::json!({"learning_rate": 3e-5}),
+        }
+    }
+
+    fn temp(name: &str) -> std::path::PathBuf {
+        std::env::temp_dir().join(format!("crm-learn-{}-{name}", std::process::id()))
+    }
+
+    fn bits(net: &ActorCritic) -> Vec<u32> {
+        net.params()
+            .iter()
+            .flat_map(|(_, v)| {
+                v.as_tensor()
+                    .flatten_all()
+                    .and_then(|t| t.to_vec1::<f32>())
+                    .unwrap_or_default()
+            })
+            .map(f32::to_bits)
+            .collect()
+    }
+
+    #[test]
+    fn a_checkpoint_round_trips_bitwise_with_its_header() {
+        let layout = Layout {
+            state_width: 6,
+            stages: 5,
+            actions: 8,
+        };
+        let net = ActorCritic::new(layout, &[32, 32], 11).expect("net");
+        let path = temp("roundtrip.safetensors");
+        let written = header(&net);
+        Checkpoint::save(&net, &written, &path).expect("save");
+        let (loaded, read) = Checkpoint::load(&path, "abc123", "grasp-sim/test").expect("load");
+        assert_eq!(read, written);
+        assert_eq!(bits(&loaded), bits(&net));
+        assert_eq!(Checkpoint::read_header(&path).expect("header").steps, 1000);
+        std::fs::remove_file(&path).ok();
+    }
+
+    #[test]
+    fn other_specs_versions_and_non_checkpoints_are_refused() {
+        let net = ActorCritic::new(
+            Layout {
+                state_width: 2,
+                stages: 2,
+                actions: 2,
+            },
+            &[4],
+            1,
+        )
+        .expect("net");
+        let path = temp("refuse.safetensors");
+        Checkpoint::save(&net, &header(&net), &path).expect("save");
+        let err = Checkpoint::load(&path, "ffff", "grasp-sim/test")
+            .expect_err("spec")
+            .to_string();
+        assert!(err.contains("trained with crm spec abc123"), "{err}");
+        let err = Checkpoint::load(&path, "abc123", "grasp-sim/other")
+            .expect_err("env")
+            .to_string();
+        assert!(
+            err.contains("trained in environment grasp-sim/test"),
+            "{err}"
+        );
+
+        let junk = temp("junk.safetensors");
+        std::fs::write(&junk, b"this is not a checkpoint").expect("write");
+        let err = Checkpoint::read_header(&junk)
+            .expect_err("junk")
+            .to_string();
+        assert!(err.contains("not a safetensors file"), "{err}");
+        let bare = temp("bare.safetensors");
+        let tensors: Vec<(&str, &candle_core::Tensor)> = net
+            .params()
+            .iter()
+            .map(|(n, v)| (n.as_str(), v.as_tensor()))
+            .collect();
+        safetensors::serialize_to_file(tensors, None, &bare).expect("write");
+        let err = Checkpoint::read_header(&bare)
+            .expect_err("bare")
+            .to_string();
+        assert!(err.contains("without a crm-grasp header"), "{err}");
+        for p in [path, junk, bare] {
+            std::fs::remove_file(p).ok();
+        }
+    }
+}

@@ -1,0 +1,209 @@
+//! PPO configuration with the paper's defaults (section V-B-2) and CleanRL's names.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Knobs of PPO with the CRM (paper, section III-B).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PpoConfig {
+    /// Initial learning rate. Paper V-B-2: 3e-5.
+    pub learning_rate: f64,
+    /// Discount. Paper V-B-2: 0.99.
+    pub gamma: f32,
+    /// GAE lambda. Paper V-B-2: 0.95.
+    pub gae_lambda: f32,
+    /// Minibatch size. Paper V-B-2: "a batch size of 64".
+    pub minibatch_size: usize,
+    /// Surrogate clip range epsilon. Not given in the paper; 0.2, stable-baselines3's default,
+    /// which the authors' code used.
+    pub clip_coef: f32,
+    /// Entropy bonus coefficient. Not given in the paper; 0.0, stable-baselines3's default.
+    pub ent_coef: f32,
+    /// Value loss coefficient. Not given in the paper; 0.5, stable-baselines3's default.
+    pub vf_coef: f32,
+    /// Gradient norm clip. Not given in the paper; 0.5, stable-baselines3's default.
+    pub max_grad_norm: f32,
+    /// Passes over each rollout. Not given in the paper; 10, stable-baselines3's default.
+    pub update_epochs: usize,
+    /// Environment steps per rollout (over all environments). stable-baselines3's 2048.
+    pub rollout_steps: usize,
+    /// Hidden layer widths of the policy and value networks.
+    pub hidden: Vec<usize>,
+    /// Early stop when the last `early_stop_window` episodes succeed at this rate or more.
+    /// Paper V-B-2: 99% over the most recent 100 episodes.
+    pub early_stop_success: f32,
+    pub early_stop_window: usize,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        Self {
+            learning_rate: 3e-5,
+            gamma: 0.99,
+            gae_lambda: 0.95,
+            minibatch_size: 64,
+            clip_coef: 0.2,
+            ent_coef: 0.0,
+            vf_coef: 0.5,
+            max_grad_norm: 0.5,
+            update_epochs: 10,
+            rollout_steps: 2048,
+            hidden: vec![256, 256],
+            early_stop_success: 0.99,
+            early_stop_window: 100,
+        }
+    }
+}
+
+impl PpoConfig {
+    /// The learning rate at a point of training (`progress` in `[0, 1]`): the paper's 100%
+    /// for the first 40%, 90% until 70%, and 80% for the rest (section V-B-2).
+    pub fn learning_rate_at(&self, progress: f64) -> f64 {
+        let factor = if progress < 0.4 {
+            1.0
+        } else if progress < 0.7 {
+            0.9
+        } else {
+            0.8
+        };
+        self.learning_rate * factor
+    }
+
+    /// Refuses values out of their domain, naming the field.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |field: &'static str, message: &str| {
+            Err(Error::Config {
+                field,
+                message: message.to_string(),
+            })
+        };
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return bad("learning_rate", "must be positive");
+        }
+        if !(0.0..=1.0).contains(&self.gamma) {
+            return bad("gamma", "must be in [0, 1]");
+        }
+        if !(0.0..=1.0).contains(&self.gae_lambda) {
+            return bad("gae_lambda", "must be in [0, 1]");
+        }
+        if self.minibatch_size == 0 {
+            return bad("minibatch_size", "must be at least 1");
+        }
+        if !(self.clip_coef > 0.0 && self.clip_coef < 1.0) {
+            return bad("clip_coef", "must be in (0, 1)");
+        }
+        if !(self.ent_coef >= 0.0 && self.vf_coef >= 0.0) {
+            return bad("ent_coef", "coefficients must be non-negative");
+        }
+        if self.max_grad_norm.is_nan() || self.max_grad_norm <= 0.0 {
+            return bad("max_grad_norm", "must be positive");
+        }
+        if self.update_epochs == 0 || self.rollout_steps == 0 {
+            return bad(
+                "update_epochs",
+                "epochs and rollout steps must be at least 1",
+            );
+        }
+        if self.hidden.is_empty() || self.hidden.contains(&0) {
+            return bad("hidden", "needs at least one layer and no zero width");
+        }
+        if !(0.0..=1.0).contains(&self.early_stop_success) || self.early_stop_window == 0 {
+            return bad(
+                "early_stop_success",
+                "must be in [0, 1] with a window of at least 1",
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The paper's early-stop rule: stop when the most recent `window` episodes reach a success
+/// rate of at least `threshold` (section V-B-2).
+#[derive(Clone, Debug)]
+pub struct EarlyStop {
+    window: usize,
+    threshold: f32,
+    recent: std::collections::VecDeque<bool>,
+}
+
+impl EarlyStop {
+    pub fn new(window: usize, threshold: f32) -> Self {
+        Self {
+            window: window.max(1),
+            threshold,
+            recent: std::collections::VecDeque::with_capacity(window.max(1)),
+        }
+    }
+
+    /// Records an episode; returns whether training should stop now.
+    pub fn record(&mut self, success: bool) -> bool {
+        if self.recent.len() == self.window {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(success);
+        self.should_stop()
+    }
+
+    /// A full window at or above the threshold.
+    pub fn should_stop(&self) -> bool {
+        self.recent.len() == self.window && self.success_rate() >= self.threshold
+    }
+
+    /// Success rate over the episodes in the window so far.
+    pub fn success_rate(&self) -> f32 {
+        if self.recent.is_empty() {
+            return 0.0;
+        }
+        self.recent.iter().filter(|&&s| s).count() as f32 / self.recent.len() as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_learning_rate_follows_the_papers_steps() {
+        let config = PpoConfig::default();
+        assert_eq!(config.learning_rate_at(0.0), 3e-5);
+        assert_eq!(config.learning_rate_at(0.399), 3e-5);
+        assert!((config.learning_rate_at(0.4) - 2.7e-5).abs() < 1e-12);
+        assert!((config.learning_rate_at(0.69) - 2.7e-5).abs() < 1e-12);
+        assert!((config.learning_rate_at(0.7) - 2.4e-5).abs() < 1e-12);
+        assert!((config.learning_rate_at(1.0) - 2.4e-5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn early_stop_needs_a_full_window_at_99_percent() {
+        let mut rule = EarlyStop::new(100, 0.99);
+        for _ in 0..99 {
+            assert!(!rule.record(true), "a window of 99 is not full");
+        }
+        assert!(rule.record(true));
+        // One failure in the last 100 is still 99%; a second drops below.
+        assert!(rule.record(false));
+        assert!(!rule.record(false));
+        for _ in 0..98 {
+            rule.record(true);
+        }
+        assert!(!rule.should_stop(), "two failures still in the window");
+        assert!(rule.record(true), "one failure left in the window: 99%");
+        assert!((rule.success_rate() - 0.99).abs() < 1e-6);
+    }
+
+    #[test]
+    fn invalid_configs_name_the_field() {
+        let config = PpoConfig {
+            gamma: 1.5,
+            ..PpoConfig::default()
+        };
+        let err = config
+            .validate()
+            .expect_err("gamma out of range")
+            .to_string();
+        assert!(err.contains("gamma"), "{err}");
+        assert!(PpoConfig::default().validate().is_ok());
+    }
+}

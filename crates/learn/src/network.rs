@@ -1,0 +1,396 @@
+//! The actor-critic networks: a Gaussian policy over the union action space with the stage's
+//! action mask, and a value function on the stage's abstract state plus the stage.
+//!
+//! Both see `[phi_i(u) zero-padded to the widest abstraction, one-hot(stage)]`. Dimensions
+//! outside the stage's action set are neither sampled nor counted in log-probabilities, so
+//! they receive no gradient.
+
+use candle_core::{D, DType, Device, Tensor, Var};
+use candle_nn::{Linear, Module};
+
+use crate::error::{Error, Result};
+
+/// Input and output sizes of the networks, from a machine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Layout {
+    /// Width of the padded abstract state.
+    pub state_width: usize,
+    /// Number of stages (one-hot width).
+    pub stages: usize,
+    /// Width of the union action space.
+    pub actions: usize,
+}
+
+impl Layout {
+    pub fn of(machine: &crm::Machine) -> Self {
+        Self {
+            state_width: machine.max_abstract_len(),
+            stages: machine.stage_count(),
+            actions: machine.action_count(),
+        }
+    }
+
+    pub fn input_width(&self) -> usize {
+        self.state_width + self.stages
+    }
+}
+
+/// A small deterministic generator for weight initialization (SplitMix64), so the same seed
+/// gives bitwise-identical networks on every machine.
+struct Init(u64);
+
+impl Init {
+    fn next_f32(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in `[-bound, bound]`.
+    fn uniform(&mut self, n: usize, bound: f32) -> Vec<f32> {
+        (0..n)
+            .map(|_| (2.0 * self.next_f32() - 1.0) * bound)
+            .collect()
+    }
+}
+
+/// The actor and the critic, with their parameters in a stable, named order.
+pub struct ActorCritic {
+    layout: Layout,
+    hidden: Vec<usize>,
+    device: Device,
+    actor: Vec<Linear>,
+    critic: Vec<Linear>,
+    log_std: Var,
+    params: Vec<(String, Var)>,
+}
+
+fn layer(
+    init: &mut Init,
+    device: &Device,
+    name: &str,
+    inputs: usize,
+    outputs: usize,
+    gain: f32,
+    params: &mut Vec<(String, Var)>,
+) -> Result<Linear> {
+    // Uniform with the variance of He initialization, scaled by `gain`.
+    let bound = gain * (6.0 / inputs as f32).sqrt();
+    let weight = Var::from_vec(
+        init.uniform(inputs * outputs, bound),
+        (outputs, inputs),
+        device,
+    )?;
+    let bias = Var::zeros(outputs, DType::F32, device)?;
+    let linear = Linear::new(weight.as_tensor().clone(), Some(bias.as_tensor().clone()));
+    params.push((format!("{name}.weight"), weight));
+    params.push((format!("{name}.bias"), bias));
+    Ok(linear)
+}
+
+fn mlp(
+    init: &mut Init,
+    device: &Device,
+    prefix: &str,
+    widths: &[usize],
+    params: &mut Vec<(String, Var)>,
+) -> Result<Vec<Linear>> {
+    let last = widths.len() - 2;
+    widths
+        .windows(2)
+        .enumerate()
+        .map(|(k, w)| {
+            // A small last layer keeps the initial policy near its mean and values near zero.
+            let gain = if k == last { 0.01 } else { 1.0 };
+            layer(
+                init,
+                device,
+                &format!("{prefix}.{k}"),
+                w[0],
+                w[1],
+                gain,
+                params,
+            )
+        })
+        .collect()
+}
+
+fn run(layers: &[Linear], input: &Tensor) -> Result<Tensor> {
+    let mut x = input.clone();
+    for (k, layer) in layers.iter().enumerate() {
+        x = layer.forward(&x)?;
+        if k + 1 < layers.len() {
+            x = x.tanh()?;
+        }
+    }
+    Ok(x)
+}
+
+impl std::fmt::Debug for ActorCritic {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ActorCritic")
+            .field("layout", &self.layout)
+            .field("hidden", &self.hidden)
+            .finish_non_exhaustive()
+    }
+}
+
+impl ActorCritic {
+    /// New networks for `layout` with hidden widths `hidden`, initialized from `seed`.
+    pub fn new(layout: Layout, hidden: &[usize], seed: u64) -> Result<Self> {
+        let device = Device::Cpu;
+        let mut init = Init(seed);
+        let mut params = Vec::new();
+        let mut widths = vec![layout.input_width()];
+        widths.extend_from_slice(hidden);
+        let mut actor_widths = widths.clone();
+        actor_widths.push(layout.actions);
+        let mut critic_widths = widths;
+        critic_widths.push(1);
+        let actor = mlp(&mut init, &device, "actor", &actor_widths, &mut params)?;
+        let critic = mlp(&mut init, &device, "critic", &critic_widths, &mut params)?;
+        let log_std = Var::from_vec(vec![-0.5f32; layout.actions], layout.actions, &device)?;
+        params.push(("actor.log_std".to_string(), log_std.clone()));
+        Ok(Self {
+            layout,
+            hidden: hidden.to_vec(),
+            device,
+            actor,
+            critic,
+            log_std,
+            params,
+        })
+    }
+
+    pub fn layout(&self) -> Layout {
+        self.layout
+    }
+
+    pub fn hidden(&self) -> &[usize] {
+        &self.hidden
+    }
+
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// Parameters in a stable order, named for checkpoints.
+    pub fn params(&self) -> &[(String, Var)] {
+        &self.params
+    }
+
+    /// Builds the network input from abstract states (each at most `state_width` long) and
+    /// their stages.
+    pub fn input(&self, states: &[Vec<f32>], stages: &[usize]) -> Result<Tensor> {
+        if states.len() != stages.len() {
+            return Err(Error::Length {
+                what: "stages",
+                expected: states.len(),
+                got: stages.len(),
+            });
+        }
+        let width = self.layout.input_width();
+        let mut data = vec![0.0f32; states.len() * width];
+        for (row, (state, &stage)) in states.iter().zip(stages).enumerate() {
+            if state.len() > self.layout.state_width {
+                return Err(Error::Length {
+                    what: "abstract state",
+                    expected: self.layout.state_width,
+                    got: state.len(),
+                });
+            }
+            if stage >= self.layout.stages {
+                return Err(Error::Length {
+                    what: "stage index",
+                    expected: self.layout.stages,
+                    got: stage,
+                });
+            }
+            let base = row * width;
+            data[base..base + state.len()].copy_from_slice(state);
+            data[base + self.layout.state_width + stage] = 1.0;
+        }
+        Ok(Tensor::from_vec(data, (states.len(), width), &self.device)?)
+    }
+
+    /// Policy means `[batch, actions]`.
+    pub fn mean(&self, input: &Tensor) -> Result<Tensor> {
+        run(&self.actor, input)
+    }
+
+    /// Values `[batch]`.
+    pub fn value(&self, input: &Tensor) -> Result<Tensor> {
+        Ok(run(&self.critic, input)?.squeeze(1)?)
+    }
+
+    /// `log pi(a | u')` summed over the live dimensions only: `[batch]`.
+    pub fn log_prob(&self, mean: &Tensor, actions: &Tensor, mask: &Tensor) -> Result<Tensor> {
+        let log_std = self
+            .log_std
+            .as_tensor()
+            .unsqueeze(0)?
+            .broadcast_as(mean.shape())?;
+        let z = ((actions - mean)? / log_std.exp()?)?;
+        let half_log_two_pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
+        let per_dim = ((z.sqr()? * -0.5)? - log_std)?.affine(1.0, -half_log_two_pi)?;
+        Ok((per_dim * mask)?.sum(D::Minus1)?)
+    }
+
+    /// Entropy of the policy over the live dimensions: `[batch]`.
+    pub fn entropy(&self, mask: &Tensor) -> Result<Tensor> {
+        let per_dim = self
+            .log_std
+            .as_tensor()
+            .affine(1.0, 0.5 + 0.5 * (2.0 * std::f64::consts::PI).ln())?;
+        Ok(mask.broadcast_mul(&per_dim.unsqueeze(0)?)?.sum(D::Minus1)?)
+    }
+
+    /// The policy's standard deviations, per union dimension.
+    pub fn std(&self) -> Result<Vec<f32>> {
+        Ok(self.log_std.as_tensor().exp()?.to_vec1()?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layout() -> Layout {
+        Layout {
+            state_width: 4,
+            stages: 3,
+            actions: 5,
+        }
+    }
+
+    #[test]
+    fn the_same_seed_gives_bitwise_identical_networks() {
+        let a = ActorCritic::new(layout(), &[16, 16], 7).expect("net");
+        let b = ActorCritic::new(layout(), &[16, 16], 7).expect("net");
+        let c = ActorCritic::new(layout(), &[16, 16], 8).expect("net");
+        let flat = |net: &ActorCritic| -> Vec<u32> {
+            net.params()
+                .iter()
+                .flat_map(|(_, v)| {
+                    v.as_tensor()
+                        .flatten_all()
+                        .and_then(|t| t.to_vec1::<f32>())
+                        .unwrap_or_default()
+                })
+                .map(f32::to_bits)
+                .collect()
+        };
+        assert_eq!(flat(&a), flat(&b));
+        assert_ne!(flat(&a), flat(&c));
+    }
+
+    #[test]
+    fn masked_dimensions_get_no_gradient_and_do_not_count() {
+        let net = ActorCritic::new(layout(), &[16], 3).expect("net");
+        let input = net
+            .input(&[vec![0.1, -0.2, 0.3], vec![0.5, 0.0, 0.0, 1.0]], &[0, 1])
+            .expect("input");
+        let mean = net.mean(&input).expect("mean");
+        let actions = Tensor::new(
+            &[[0.3f32, -0.1, 0.2, 0.9, -0.7], [0.0, 0.4, -0.2, 0.1, 0.5]],
+            net.device(),
+        )
+        .expect("t");
+        // Stage 0 uses dimensions 0-2; stage 1 uses all five.
+        let mask = Tensor::new(
+            &[[1.0f32, 1.0, 1.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0, 1.0]],
+            net.device(),
+        )
+        .expect("t");
+        let log_prob = net.log_prob(&mean, &actions, &mask).expect("log prob");
+        let loss = log_prob
+            .narrow(0, 0, 1)
+            .expect("row")
+            .sum_all()
+            .expect("sum");
+        let grads = loss.backward().expect("backward");
+        let out = net
+            .params()
+            .iter()
+            .find(|(n, _)| n == "actor.1.weight")
+            .map(|(_, v)| v)
+            .expect("output layer");
+        let grad = grads
+            .get(out.as_tensor())
+            .expect("gradient")
+            .to_vec2::<f32>()
+            .expect("vec");
+        // Rows 3 and 4 of the output layer produce the masked dimensions.
+        for (row, values) in grad.iter().enumerate().skip(3) {
+            assert!(values.iter().all(|&g| g == 0.0), "row {row}: {values:?}");
+        }
+        assert!(grad[0].iter().any(|&g| g != 0.0));
+        let std_grad = grads
+            .get(
+                net.params()
+                    .last()
+                    .map(|(_, v)| v.as_tensor())
+                    .expect("log_std"),
+            )
+            .expect("grad")
+            .to_vec1::<f32>()
+            .expect("vec");
+        assert_eq!(&std_grad[3..], &[0.0, 0.0]);
+
+        // Changing a masked action changes nothing.
+        let other = Tensor::new(
+            &[[0.3f32, -0.1, 0.2, -5.0, 5.0], [0.0, 0.4, -0.2, 0.1, 0.5]],
+            net.device(),
+        )
+        .expect("t");
+        let again = net
+            .log_prob(&mean, &other, &mask)
+            .expect("log prob")
+            .to_vec1::<f32>()
+            .expect("vec");
+        assert_eq!(again, log_prob.to_vec1::<f32>().expect("vec"));
+    }
+
+    #[test]
+    fn the_log_prob_is_the_gaussian_density() {
+        let net = ActorCritic::new(
+            Layout {
+                state_width: 1,
+                stages: 1,
+                actions: 1,
+            },
+            &[4],
+            1,
+        )
+        .expect("net");
+        let mean = Tensor::new(&[[0.5f32]], net.device()).expect("t");
+        let action = Tensor::new(&[[1.0f32]], net.device()).expect("t");
+        let mask = Tensor::new(&[[1.0f32]], net.device()).expect("t");
+        let got = net
+            .log_prob(&mean, &action, &mask)
+            .expect("lp")
+            .to_vec1::<f32>()
+            .expect("v")[0];
+        let std = (-0.5f32).exp();
+        let want =
+            -0.5 * ((1.0 - 0.5) / std).powi(2) - std.ln() - 0.5 * (2.0 * std::f32::consts::PI).ln();
+        assert!((got - want).abs() < 1e-5, "{got} vs {want}");
+    }
+
+    #[test]
+    fn inputs_are_checked() {
+        let net = ActorCritic::new(layout(), &[8], 1).expect("net");
+        assert!(net.input(&[vec![0.0; 5]], &[0]).is_err());
+        assert!(net.input(&[vec![0.0; 2]], &[3]).is_err());
+        assert!(net.input(&[vec![0.0; 2]], &[]).is_err());
+        let input = net
+            .input(&[vec![1.0, 2.0]], &[2])
+            .expect("input")
+            .to_vec2::<f32>()
+            .expect("v");
+        assert_eq!(input[0], vec![1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    }
+}
