@@ -25,6 +25,10 @@ enum Command {
     Tasks(commands::tasks::TasksArgs),
     /// Print the grasping CRM: stages, events, edges and rewards.
     Spec(commands::tasks::SpecArgs),
+    /// Train a policy with PPO inside the grasping CRM (crm-ppo, ippo, lppo).
+    Train(commands::train::TrainArgs),
+    /// Evaluate a checkpoint over random tasks: success and episode length per objective.
+    Eval(commands::eval::EvalArgs),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
@@ -42,6 +46,8 @@ fn main() -> std::process::ExitCode {
         Command::Oracle(args) => commands::oracle::run(args),
         Command::Tasks(args) => commands::tasks::run(args),
         Command::Spec(args) => commands::tasks::run_spec(args),
+        Command::Train(args) => commands::train::run(args),
+        Command::Eval(args) => commands::eval::run(args),
         Command::Bench(command) => commands::bench::run(command),
     };
     match result {

@@ -80,3 +80,55 @@ fn bad_input_is_refused_with_a_message_and_exit_code_2() {
     assert!(stderr.contains("benchmark.json"), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn train_writes_a_checkpoint_that_eval_reads_and_refuses_bad_input() {
+    let dir = std::env::temp_dir().join(format!("crm-cli-train-{}", std::process::id()));
+    let out = dir.to_str().expect("utf-8 path");
+    let (code, _, stderr) = crm(&[
+        "train",
+        "--algo",
+        "lppo",
+        "--steps",
+        "256",
+        "--seed",
+        "3",
+        "--out",
+        out,
+        "--task",
+        "mouse-press",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let checkpoint = dir.join("lppo.safetensors");
+    assert!(checkpoint.exists());
+    let metrics = std::fs::read_to_string(dir.join("metrics.jsonl")).expect("metrics");
+    let first: serde_json::Value =
+        serde_json::from_str(metrics.lines().next().expect("a line")).expect("json");
+    assert_eq!(first["steps"], 256);
+
+    let (code, stdout, stderr) = crm(&[
+        "eval",
+        "--checkpoint",
+        checkpoint.to_str().expect("path"),
+        "--episodes",
+        "3",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert_eq!(report["algorithm"], "lppo");
+    assert_eq!(report["episodes"], 3);
+
+    let (code, _, stderr) = crm(&["train", "--steps=0", "--out", out]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("--steps must be positive"), "{stderr}");
+    let (code, _, stderr) = crm(&["train", "--algo", "crm-sac", "--steps", "10", "--out", out]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("not available yet"), "{stderr}");
+    let junk = dir.join("junk.safetensors");
+    std::fs::write(&junk, b"not a checkpoint").expect("write");
+    let (code, _, stderr) = crm(&["eval", "--checkpoint", junk.to_str().expect("path")]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("not a safetensors file"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}

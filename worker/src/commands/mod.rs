@@ -1,8 +1,10 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod eval;
 pub mod oracle;
 pub mod tasks;
+pub mod train;
 
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -1,0 +1,180 @@
+//! `crm train`: PPO on the grasping environment inside the grasping CRM, with the reward mode
+//! of the chosen algorithm; writes checkpoints and a metrics log.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use crm_learn::checkpoint::FORMAT;
+use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, PpoConfig};
+use grasp_sim::{GraspEnv, TaskChoice};
+
+use super::EnvArgs;
+
+/// The learners by name. `crm-sac` and flat `ppo` come with the rest of the learners issue.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Algorithm {
+    /// PPO with intra-stage and transition rewards (the paper's method).
+    CrmPpo,
+    /// PPO with the stage-wise sparse transition rewards only.
+    Ippo,
+    /// PPO with the hierarchical dense intra-stage rewards only.
+    Lppo,
+    /// SAC inside the CRM (not available yet).
+    CrmSac,
+    /// PPO on the flat, unstaged problem (not available yet).
+    Ppo,
+}
+
+impl Algorithm {
+    pub fn name(self) -> &'static str {
+        match self {
+            Algorithm::CrmPpo => "crm-ppo",
+            Algorithm::Ippo => "ippo",
+            Algorithm::Lppo => "lppo",
+            Algorithm::CrmSac => "crm-sac",
+            Algorithm::Ppo => "ppo",
+        }
+    }
+
+    pub fn reward_mode(self) -> crm::RewardMode {
+        match self {
+            Algorithm::Ippo => crm::RewardMode::Sparse,
+            Algorithm::Lppo => crm::RewardMode::Dense,
+            _ => crm::RewardMode::Crm,
+        }
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TrainArgs {
+    #[command(flatten)]
+    pub env: EnvArgs,
+    #[arg(long, value_enum, default_value = "crm-ppo")]
+    pub algo: Algorithm,
+    /// Environment steps to train for.
+    #[arg(long)]
+    pub steps: i64,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Directory for the checkpoint and metrics (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Train on one task (id) instead of random tasks.
+    #[arg(long)]
+    pub task: Option<String>,
+    /// A JSON file with PPO settings (see `crm_learn::PpoConfig`); defaults cite the paper.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+}
+
+pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    if args.steps <= 0 {
+        bail!("--steps must be positive, got {}", args.steps);
+    }
+    if matches!(args.algo, Algorithm::CrmSac | Algorithm::Ppo) {
+        bail!(
+            "--algo {} is not available yet; use crm-ppo, ippo or lppo",
+            args.algo.name()
+        );
+    }
+    let config: PpoConfig = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
+        }
+        None => PpoConfig::default(),
+    };
+    config.validate()?;
+    let benchmark = args.env.benchmark()?;
+    let machine = args.env.machine()?;
+    let mut env = GraspEnv::new(benchmark.clone(), args.env.config());
+    if let Some(id) = &args.task {
+        let index = benchmark
+            .tasks
+            .iter()
+            .position(|t| &t.id == id)
+            .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))?;
+        env.set_task_choice(TaskChoice::Fixed(index))?;
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let spec_hash = machine.spec().hash();
+    let layout = Layout::of(&machine);
+    let mut crm_env = crm::CrmEnv::new(machine, env, args.algo.reward_mode());
+    let mut ppo = Ppo::new(layout, config.clone(), args.seed)?;
+    let mut early_stop = EarlyStop::new(config.early_stop_window, config.early_stop_success);
+    let total = args.steps as u64;
+    let mut done = 0u64;
+    let mut episode_seed = args.seed.wrapping_mul(1_000_003);
+    let mut next_seed = || {
+        episode_seed = episode_seed.wrapping_add(1);
+        episode_seed
+    };
+    let metrics_path = args.out.join("metrics.jsonl");
+    let mut metrics = std::fs::File::create(&metrics_path)
+        .with_context(|| format!("creating {}", metrics_path.display()))?;
+    let started = Instant::now();
+    let mut stopped_early = false;
+    while done < total {
+        let steps = config.rollout_steps.min((total - done) as usize);
+        let rollout = ppo.collect(&mut crm_env, steps, &mut next_seed)?;
+        done += rollout.len() as u64;
+        let stats = ppo.update(&rollout, done as f64 / total as f64)?;
+        for &(success, _, _) in &rollout.episodes {
+            stopped_early |= early_stop.record(success);
+        }
+        let episodes = rollout.episodes.len().max(1) as f64;
+        let mean_return = rollout.episodes.iter().map(|e| f64::from(e.2)).sum::<f64>() / episodes;
+        let mean_length = rollout.episodes.iter().map(|e| e.1 as f64).sum::<f64>() / episodes;
+        let elapsed = started.elapsed().as_secs_f64();
+        let line = serde_json::json!({
+            "steps": done,
+            "wall_s": elapsed,
+            "steps_per_s": done as f64 / elapsed.max(1e-9),
+            "episodes": rollout.episodes.len(),
+            "success_rate_last_100": early_stop.success_rate(),
+            "mean_return": mean_return,
+            "mean_episode_length": mean_length,
+            "losses/policy": stats.policy_loss,
+            "losses/value": stats.value_loss,
+            "losses/entropy": stats.entropy,
+            "losses/approx_kl": stats.approx_kl,
+            "losses/clipfrac": stats.clipfrac,
+            "learning_rate": stats.learning_rate,
+        });
+        writeln!(metrics, "{line}")?;
+        eprintln!(
+            "{:>9}/{total} steps  {:>6.0} steps/s  success(last 100) {:.2}  return {:>8.1}  length {:>5.1}",
+            done,
+            done as f64 / elapsed.max(1e-9),
+            early_stop.success_rate(),
+            mean_return,
+            mean_length
+        );
+        if stopped_early {
+            eprintln!(
+                "early stop: the last {} episodes reached the success threshold",
+                config.early_stop_window
+            );
+            break;
+        }
+    }
+    let header = CheckpointHeader {
+        format: FORMAT.to_string(),
+        algorithm: args.algo.name().to_string(),
+        spec_hash,
+        env_version: grasp_sim::ENV_VERSION.to_string(),
+        seed: args.seed,
+        steps: done,
+        layout,
+        hidden: config.hidden.clone(),
+        config: serde_json::to_value(&config)?,
+    };
+    let path = args.out.join(format!("{}.safetensors", args.algo.name()));
+    Checkpoint::save(&ppo.net, &header, &path)?;
+    eprintln!("wrote {} and {}", path.display(), metrics_path.display());
+    Ok(())
+}
