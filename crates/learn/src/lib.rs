@@ -1,6 +1,7 @@
 //! Learners on candle for the Contextual Reward Machine (paper, section III-B): the
 //! actor-critic networks with the stage's action mask, GAE with the transition reward inside
-//! the TD error, the paper's learning-rate steps and early-stop rule, and checkpoints
+//! the TD error, PPO with vectorized rollouts, the paper's learning-rate steps and early-stop
+//! rule, and checkpoints
 //! (safetensors with a JSON header). Synchronous; no I/O but checkpoint files.
 
 pub mod checkpoint;
@@ -9,9 +10,11 @@ pub mod error;
 pub mod gae;
 pub mod network;
 pub mod ppo;
+pub mod rollout;
 
 pub use checkpoint::{Checkpoint, CheckpointHeader};
 pub use config::{EarlyStop, PpoConfig};
 pub use error::{Error, Result};
 pub use network::{ActorCritic, Layout};
-pub use ppo::{Noise, Ppo, Rollout, UpdateStats};
+pub use ppo::{Noise, Ppo, UpdateStats};
+pub use rollout::{Rollout, VecEnv};

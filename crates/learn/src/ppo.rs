@@ -1,5 +1,5 @@
 //! PPO inside a Contextual Reward Machine (paper, section III-B), read top to bottom:
-//! rollout through `crm::CrmEnv`, GAE with the transition reward in the TD error, then the
+//! a rollout (see `rollout.rs`), GAE with the transition reward in the TD error, then the
 //! minibatch loop with the clipped surrogate on abstract states, the value loss, gradient-norm
 //! clipping and the paper's learning-rate steps. The reward mode picks CRM-PPO (`crm`), LPPO
 //! (`dense`) or IPPO (`sparse`) on the same machine.
@@ -11,6 +11,7 @@ use crate::config::PpoConfig;
 use crate::error::Result;
 use crate::gae::{StepRecord, gae, normalize};
 use crate::network::{ActorCritic, Layout};
+use crate::rollout::Rollout;
 
 /// A deterministic normal sampler (SplitMix64 and Box-Muller), so rollouts are bitwise
 /// reproducible from a seed.
@@ -48,35 +49,6 @@ impl Noise {
             order.swap(i, j);
         }
         order
-    }
-}
-
-/// Collected experience of one rollout.
-#[derive(Clone, Debug, Default)]
-pub struct Rollout {
-    pub states: Vec<Vec<f32>>,
-    pub stages: Vec<usize>,
-    pub next_states: Vec<Vec<f32>>,
-    pub next_stages: Vec<usize>,
-    /// Sampled union-space actions (before the environment clips them).
-    pub actions: Vec<Vec<f32>>,
-    pub masks: Vec<Vec<f32>>,
-    pub log_probs: Vec<f32>,
-    pub intra: Vec<f32>,
-    pub transition: Vec<f32>,
-    pub terminal: Vec<bool>,
-    pub last: Vec<bool>,
-    /// Episodes that ended in this rollout: (success, length, return).
-    pub episodes: Vec<(bool, usize, f32)>,
-}
-
-impl Rollout {
-    pub fn len(&self) -> usize {
-        self.states.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.states.is_empty()
     }
 }
 
@@ -120,8 +92,49 @@ impl Ppo {
         })
     }
 
-    /// Samples (or, `deterministic`, takes the mean of) the policy at one abstract state;
-    /// returns the union-space action and its log-probability under the stage's mask.
+    /// Samples (or, `deterministic`, takes the means of) the policy at a batch of abstract
+    /// states; returns the union-space actions and their log-probabilities under the masks.
+    /// Noise is drawn row by row in order, so a batch gives the same actions as its rows one
+    /// by one.
+    pub fn act_batch(
+        &mut self,
+        states: &[Vec<f32>],
+        stages: &[usize],
+        masks: &[Vec<f32>],
+        deterministic: bool,
+    ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
+        let rows = states.len();
+        let width = self.net.layout().actions;
+        let input = self.net.input(states, stages)?;
+        let mean = self.net.mean(&input)?;
+        let means: Vec<Vec<f32>> = mean.to_vec2()?;
+        let std = self.net.std()?;
+        let actions: Vec<Vec<f32>> = means
+            .iter()
+            .map(|row| {
+                if deterministic {
+                    row.clone()
+                } else {
+                    row.iter()
+                        .zip(&std)
+                        .map(|(m, s)| m + s * self.noise.normal())
+                        .collect()
+                }
+            })
+            .collect();
+        let device = self.net.device();
+        let log_probs = self
+            .net
+            .log_prob(
+                &mean,
+                &Tensor::from_vec(actions.concat(), (rows, width), device)?,
+                &Tensor::from_vec(masks.concat(), (rows, width), device)?,
+            )?
+            .to_vec1::<f32>()?;
+        Ok((actions, log_probs))
+    }
+
+    /// [`Self::act_batch`] for one state.
     pub fn act(
         &mut self,
         state: &[f32],
@@ -129,76 +142,9 @@ impl Ppo {
         mask: &[f32],
         deterministic: bool,
     ) -> Result<(Vec<f32>, f32)> {
-        let input = self.net.input(&[state.to_vec()], &[stage])?;
-        let mean: Vec<f32> = self.net.mean(&input)?.squeeze(0)?.to_vec1()?;
-        let std = self.net.std()?;
-        let action: Vec<f32> = if deterministic {
-            mean.clone()
-        } else {
-            mean.iter()
-                .zip(&std)
-                .map(|(m, s)| m + s * self.noise.normal())
-                .collect()
-        };
-        let device = self.net.device();
-        let log_prob = self
-            .net
-            .log_prob(
-                &Tensor::from_vec(mean, (1, action.len()), device)?,
-                &Tensor::from_vec(action.clone(), (1, action.len()), device)?,
-                &Tensor::from_vec(mask.to_vec(), (1, mask.len()), device)?,
-            )?
-            .to_vec1::<f32>()?[0];
-        Ok((action, log_prob))
-    }
-
-    /// Collects `steps` transitions from `env`, resetting with `next_seed()` when an episode
-    /// ends.
-    pub fn collect<E: crm::Environment>(
-        &mut self,
-        env: &mut crm::CrmEnv<E>,
-        steps: usize,
-        next_seed: &mut dyn FnMut() -> u64,
-    ) -> Result<Rollout> {
-        let mut rollout = Rollout::default();
-        let (mut stage, mut state) = env.reset(next_seed()).map_err(crm_error)?;
-        let mut episode_return = 0.0f32;
-        let mut episode_length = 0usize;
-        for _ in 0..steps {
-            let mask = env.machine().action_mask(stage);
-            let (action, log_prob) = self.act(&state, stage, &mask, false)?;
-            let step = env.step(&action).map_err(crm_error)?;
-            episode_return += step.intra_reward + step.transition_reward;
-            episode_length += 1;
-            let last = step.done || step.truncated;
-            rollout.states.push(state);
-            rollout.stages.push(stage);
-            rollout.next_states.push(step.abstract_state.clone());
-            rollout.next_stages.push(step.stage);
-            rollout.actions.push(action);
-            rollout.masks.push(mask);
-            rollout.log_probs.push(log_prob);
-            rollout.intra.push(step.intra_reward);
-            rollout.transition.push(step.transition_reward);
-            rollout.terminal.push(step.done);
-            rollout.last.push(last);
-            if last {
-                let success = step.done && env.machine().stage_name(step.stage) == "success";
-                rollout
-                    .episodes
-                    .push((success, episode_length, episode_return));
-                episode_return = 0.0;
-                episode_length = 0;
-                (stage, state) = env.reset(next_seed()).map_err(crm_error)?;
-            } else {
-                (stage, state) = (step.stage, step.abstract_state);
-            }
-        }
-        // The rollout's cut is a trajectory end too: bootstrap from the value there.
-        if let Some(last) = rollout.last.last_mut() {
-            *last = true;
-        }
-        Ok(rollout)
+        let (mut actions, log_probs) =
+            self.act_batch(&[state.to_vec()], &[stage], &[mask.to_vec()], deterministic)?;
+        Ok((actions.pop().unwrap_or_default(), log_probs[0]))
     }
 
     /// One PPO update on a rollout at training `progress` in `[0, 1]`.
@@ -312,10 +258,6 @@ impl Ppo {
         stats.clipfrac *= scale;
         Ok(stats)
     }
-}
-
-fn crm_error(err: crm::Error) -> crate::error::Error {
-    crate::error::Error::Env(err.to_string())
 }
 
 /// Scales all gradients so their global L2 norm is at most `max_norm`; returns the norm before.

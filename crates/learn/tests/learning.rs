@@ -2,7 +2,7 @@
 //! beats the untrained one. The task is a one-dimensional reach through a two-stage machine,
 //! so the test runs in a second and exercises the learner end to end through `crm::CrmEnv`.
 
-use crm_learn::{Layout, Ppo, PpoConfig};
+use crm_learn::{Layout, Ppo, PpoConfig, VecEnv};
 
 const SPEC: &str = r#"{
   "name": "reach",
@@ -92,15 +92,11 @@ fn a_short_seeded_run_on_an_easy_task_beats_the_untrained_policy() {
     };
     let mut ppo = Ppo::new(layout, config, 1).expect("ppo");
     let before = success_rate(&mut ppo, 20);
-    let mut env = env();
-    let mut seed = 0u64;
-    let mut next_seed = || {
-        seed += 1;
-        seed
-    };
+    let mut envs = VecEnv::new((0..4).map(|_| env()).collect(), 1).expect("envs");
     let updates = 15;
     for k in 0..updates {
-        let rollout = ppo.collect(&mut env, 512, &mut next_seed).expect("rollout");
+        let rollout = envs.collect(&mut ppo, 128).expect("rollout");
+        assert_eq!(rollout.len(), 512);
         let stats = ppo
             .update(&rollout, k as f64 / updates as f64)
             .expect("update");
@@ -114,35 +110,40 @@ fn a_short_seeded_run_on_an_easy_task_beats_the_untrained_policy() {
     );
 }
 
+/// The same seed gives the same rollout and update bit for bit, whatever the thread count.
 #[test]
-fn rollouts_and_updates_are_bitwise_reproducible_from_the_seed() {
-    let run = || {
-        let layout = Layout::of(env().machine());
-        let config = PpoConfig {
-            learning_rate: 1e-3,
-            rollout_steps: 128,
-            update_epochs: 2,
-            hidden: vec![16],
-            ..PpoConfig::default()
-        };
-        let mut ppo = Ppo::new(layout, config, 9).expect("ppo");
-        let mut env = env();
-        let mut seed = 0u64;
-        let mut next_seed = || {
-            seed += 1;
-            seed
-        };
-        let rollout = ppo.collect(&mut env, 128, &mut next_seed).expect("rollout");
-        let stats = ppo.update(&rollout, 0.0).expect("update");
-        let mut bits: Vec<u32> = rollout
-            .actions
-            .iter()
-            .flatten()
-            .map(|v| v.to_bits())
-            .collect();
-        bits.push(stats.policy_loss.to_bits());
-        bits.push(stats.value_loss.to_bits());
-        bits
+fn rollouts_and_updates_are_bitwise_reproducible_across_thread_counts() {
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            let layout = Layout::of(env().machine());
+            let config = PpoConfig {
+                learning_rate: 1e-3,
+                rollout_steps: 128,
+                update_epochs: 2,
+                hidden: vec![16],
+                ..PpoConfig::default()
+            };
+            let mut ppo = Ppo::new(layout, config, 9).expect("ppo");
+            let mut envs = VecEnv::new((0..3).map(|_| env()).collect(), 5).expect("envs");
+            let rollout = envs.collect(&mut ppo, 40).expect("rollout");
+            let stats = ppo.update(&rollout, 0.0).expect("update");
+            let mut bits: Vec<u32> = rollout
+                .actions
+                .iter()
+                .flatten()
+                .map(|v| v.to_bits())
+                .collect();
+            bits.extend(rollout.intra.iter().map(|v| v.to_bits()));
+            bits.push(stats.policy_loss.to_bits());
+            bits.push(stats.value_loss.to_bits());
+            bits
+        })
     };
-    assert_eq!(run(), run());
+    let one = run(1);
+    assert_eq!(one, run(3));
+    assert_eq!(one, run(1));
 }

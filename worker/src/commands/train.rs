@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use crm_learn::checkpoint::FORMAT;
-use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, PpoConfig};
+use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, PpoConfig, VecEnv};
 use grasp_sim::{GraspEnv, TaskChoice};
 
 use super::EnvArgs;
@@ -64,6 +64,10 @@ pub struct TrainArgs {
     /// Train on one task (id) instead of random tasks.
     #[arg(long)]
     pub task: Option<String>,
+    /// Environments stepped in parallel (default: one per core). Results depend on this
+    /// number and the seed, not on the thread count.
+    #[arg(long)]
+    pub envs: Option<usize>,
     /// A JSON file with PPO settings (see `crm_learn::PpoConfig`); defaults cite the paper.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
@@ -90,29 +94,40 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     config.validate()?;
     let benchmark = args.env.benchmark()?;
     let machine = args.env.machine()?;
-    let mut env = GraspEnv::new(benchmark.clone(), args.env.config());
-    if let Some(id) = &args.task {
-        let index = benchmark
-            .tasks
-            .iter()
-            .position(|t| &t.id == id)
-            .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))?;
-        env.set_task_choice(TaskChoice::Fixed(index))?;
+    let choice = match &args.task {
+        Some(id) => TaskChoice::Fixed(
+            benchmark
+                .tasks
+                .iter()
+                .position(|t| &t.id == id)
+                .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))?,
+        ),
+        None => TaskChoice::Random,
+    };
+    let env_count = args.envs.unwrap_or_else(rayon::current_num_threads);
+    if env_count == 0 {
+        bail!("--envs must be at least 1");
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let spec_hash = machine.spec().hash();
     let layout = Layout::of(&machine);
-    let mut crm_env = crm::CrmEnv::new(machine, env, args.algo.reward_mode());
+    let envs = (0..env_count)
+        .map(|_| {
+            let mut env = GraspEnv::new(benchmark.clone(), args.env.config());
+            env.set_task_choice(choice)?;
+            Ok(crm::CrmEnv::new(
+                machine.clone(),
+                env,
+                args.algo.reward_mode(),
+            ))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut envs = VecEnv::new(envs, args.seed)?;
     let mut ppo = Ppo::new(layout, config.clone(), args.seed)?;
     let mut early_stop = EarlyStop::new(config.early_stop_window, config.early_stop_success);
     let total = args.steps as u64;
     let mut done = 0u64;
-    let mut episode_seed = args.seed.wrapping_mul(1_000_003);
-    let mut next_seed = || {
-        episode_seed = episode_seed.wrapping_add(1);
-        episode_seed
-    };
     let metrics_path = args.out.join("metrics.jsonl");
     let mut metrics = std::fs::File::create(&metrics_path)
         .with_context(|| format!("creating {}", metrics_path.display()))?;
@@ -120,7 +135,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let mut stopped_early = false;
     while done < total {
         let steps = config.rollout_steps.min((total - done) as usize);
-        let rollout = ppo.collect(&mut crm_env, steps, &mut next_seed)?;
+        let rollout = envs.collect(&mut ppo, steps.div_ceil(env_count))?;
         done += rollout.len() as u64;
         let stats = ppo.update(&rollout, done as f64 / total as f64)?;
         for &(success, _, _) in &rollout.episodes {
