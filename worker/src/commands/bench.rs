@@ -15,6 +15,33 @@ use super::{EnvArgs, emit};
 pub enum BenchCommand {
     /// Control steps per second of the grasping environment with random actions.
     Env(EnvBenchArgs),
+    /// PPO rollout steps per second (policy in the loop) and update samples per second.
+    Learn(LearnBenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct LearnBenchArgs {
+    #[command(flatten)]
+    pub env: EnvArgs,
+    /// Rollout steps to time (over all environments).
+    #[arg(long, default_value_t = 2048)]
+    pub steps: usize,
+    /// Environments stepped in parallel (default: one per core).
+    #[arg(long)]
+    pub envs: Option<usize>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Serialize)]
+struct LearnReport {
+    envs: usize,
+    rollout_steps: usize,
+    rollout_steps_per_sec: f64,
+    update_samples_per_sec: f64,
+    update_epochs: usize,
+    minibatch_size: usize,
+    hidden: Vec<usize>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -49,6 +76,7 @@ struct EnvReport {
 pub fn run(command: BenchCommand) -> anyhow::Result<()> {
     match command {
         BenchCommand::Env(args) => env(args),
+        BenchCommand::Learn(args) => learn(args),
     }
 }
 
@@ -136,6 +164,45 @@ fn env(args: EnvBenchArgs) -> anyhow::Result<()> {
         peak_rss_bytes_per_env: per_env_bytes,
         steps_timed_one_core: args.steps,
         episodes_one_core: episodes,
+    };
+    if args.json {
+        emit(&format!("{}\n", serde_json::to_string(&report)?))
+    } else {
+        emit(&format!("{}\n", serde_json::to_string_pretty(&report)?))
+    }
+}
+
+fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
+    let benchmark = args.env.benchmark()?;
+    let machine = args.env.machine()?;
+    let config = crm_learn::PpoConfig::default();
+    let env_count = args.envs.unwrap_or_else(rayon::current_num_threads).max(1);
+    let envs = (0..env_count)
+        .map(|_| {
+            crm::CrmEnv::new(
+                machine.clone(),
+                GraspEnv::new(benchmark.clone(), args.env.config()),
+                crm::RewardMode::Crm,
+            )
+        })
+        .collect();
+    let mut envs = crm_learn::VecEnv::new(envs, 1)?;
+    let mut ppo = crm_learn::Ppo::new(crm_learn::Layout::of(&machine), config.clone(), 1)?;
+    let per_env = args.steps.div_ceil(env_count).max(1);
+    let start = Instant::now();
+    let rollout = envs.collect(&mut ppo, per_env)?;
+    let rollout_secs = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    ppo.update(&rollout, 0.0)?;
+    let update_secs = start.elapsed().as_secs_f64();
+    let report = LearnReport {
+        envs: env_count,
+        rollout_steps: rollout.len(),
+        rollout_steps_per_sec: rollout.len() as f64 / rollout_secs,
+        update_samples_per_sec: (rollout.len() * config.update_epochs) as f64 / update_secs,
+        update_epochs: config.update_epochs,
+        minibatch_size: config.minibatch_size,
+        hidden: config.hidden,
     };
     if args.json {
         emit(&format!("{}\n", serde_json::to_string(&report)?))
