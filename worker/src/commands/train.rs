@@ -133,6 +133,14 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", metrics_path.display()))?;
     let started = Instant::now();
     let mut stopped_early = false;
+    let bar = indicatif::ProgressBar::new(total);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} steps {per_sec} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let stage_names: Vec<String> = (0..layout.stages)
+        .map(|s| machine.stage_name(s).to_string())
+        .collect();
     while done < total {
         let steps = config.rollout_steps.min((total - done) as usize);
         let rollout = envs.collect(&mut ppo, steps.div_ceil(env_count))?;
@@ -161,22 +169,47 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             "learning_rate": stats.learning_rate,
         });
         writeln!(metrics, "{line}")?;
-        eprintln!(
-            "{:>9}/{total} steps  {:>6.0} steps/s  success(last 100) {:.2}  return {:>8.1}  length {:>5.1}",
-            done,
-            done as f64 / elapsed.max(1e-9),
+        // Stage mix: the share of the rollout's steps taken in each stage.
+        let mut mix = vec![0usize; layout.stages];
+        for &stage in &rollout.stages {
+            mix[stage] += 1;
+        }
+        let mix: Vec<String> = mix
+            .iter()
+            .zip(&stage_names)
+            .filter(|(count, _)| **count > 0)
+            .map(|(count, name)| {
+                format!(
+                    "{name} {:.0}%",
+                    100.0 * *count as f64 / rollout.len().max(1) as f64
+                )
+            })
+            .collect();
+        let message = format!(
+            "success(last 100) {:.2}  return {:.1}  length {:.1}  [{}]",
             early_stop.success_rate(),
             mean_return,
-            mean_length
+            mean_length,
+            mix.join(", ")
         );
-        if stopped_early {
+        if bar.is_hidden() {
+            // Not a terminal (a log file, CI): one line per update instead of a bar.
             eprintln!(
+                "{done}/{total} steps  {:.0} steps/s  {message}",
+                done as f64 / elapsed.max(1e-9)
+            );
+        }
+        bar.set_position(done.min(total));
+        bar.set_message(message);
+        if stopped_early {
+            bar.println(format!(
                 "early stop: the last {} episodes reached the success threshold",
                 config.early_stop_window
-            );
+            ));
             break;
         }
     }
+    bar.finish();
     let header = CheckpointHeader {
         format: FORMAT.to_string(),
         algorithm: args.algo.name().to_string(),
