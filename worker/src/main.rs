@@ -29,6 +29,9 @@ enum Command {
     Train(commands::train::TrainArgs),
     /// Evaluate a checkpoint over random tasks: success and episode length per objective.
     Eval(commands::eval::EvalArgs),
+    /// The grasp-topology selection network: train it or ask it.
+    #[command(subcommand)]
+    Topology(commands::topology::TopologyCommand),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
@@ -48,6 +51,7 @@ fn main() -> std::process::ExitCode {
         Command::Spec(args) => commands::tasks::run_spec(args),
         Command::Train(args) => commands::train::run(args),
         Command::Eval(args) => commands::eval::run(args),
+        Command::Topology(command) => commands::topology::run(command),
         Command::Bench(command) => commands::bench::run(command),
     };
     match result {

@@ -132,3 +132,54 @@ fn train_writes_a_checkpoint_that_eval_reads_and_refuses_bad_input() {
     assert!(stderr.contains("not a safetensors file"), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn the_topology_network_trains_and_predicts_the_benchmark_topology() {
+    let model = std::env::temp_dir().join(format!(
+        "crm-cli-topology-{}.safetensors",
+        std::process::id()
+    ));
+    let path = model.to_str().expect("utf-8 path");
+    let (code, stdout, stderr) = crm(&[
+        "topology",
+        "train",
+        "--out",
+        path,
+        "--samples",
+        "20",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert!(
+        report["held_out_accuracy"].as_f64().expect("accuracy") > 0.8,
+        "{report}"
+    );
+    let (code, stdout, stderr) = crm(&[
+        "topology",
+        "predict",
+        "--model",
+        path,
+        "--object",
+        "mouse",
+        "--objective",
+        "press",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let prediction: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert_eq!(prediction["topology"], "platform");
+    let (code, _, stderr) = crm(&[
+        "topology",
+        "predict",
+        "--model",
+        path,
+        "--object",
+        "mouse",
+        "--objective",
+        "juggle",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("unknown objective"), "{stderr}");
+    std::fs::remove_file(&model).ok();
+}

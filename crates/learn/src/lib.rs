@@ -1,7 +1,7 @@
 //! Learners on candle for the Contextual Reward Machine (paper, section III-B): the
 //! actor-critic networks with the stage's action mask, GAE with the transition reward inside
 //! the TD error, PPO with vectorized rollouts, the paper's learning-rate steps and early-stop
-//! rule, and checkpoints
+//! rule, the grasp-topology network (section II-B), and checkpoints
 //! (safetensors with a JSON header). Synchronous; no I/O but checkpoint files.
 
 pub mod checkpoint;
@@ -11,6 +11,7 @@ pub mod gae;
 pub mod network;
 pub mod ppo;
 pub mod rollout;
+pub mod topology;
 
 pub use checkpoint::{Checkpoint, CheckpointHeader};
 pub use config::{EarlyStop, PpoConfig};
@@ -18,3 +19,4 @@ pub use error::{Error, Result};
 pub use network::{ActorCritic, Layout};
 pub use ppo::{Noise, Ppo, UpdateStats};
 pub use rollout::{Rollout, VecEnv};
+pub use topology::{Example, TopologyNet};

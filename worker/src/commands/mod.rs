@@ -4,6 +4,7 @@ pub mod bench;
 pub mod eval;
 pub mod oracle;
 pub mod tasks;
+pub mod topology;
 pub mod train;
 
 use std::path::PathBuf;

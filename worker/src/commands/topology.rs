@@ -1,0 +1,194 @@
+//! `crm topology train|predict`: the grasp-topology network on the benchmark's objects.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
+
+use anyhow::Context;
+use crm_learn::ppo::Noise;
+use crm_learn::{Example, TopologyNet};
+use grasp_sim::Benchmark;
+use grasp_sim::benchmark::{OBJECT_FEATURES, Object, Objective, Topology};
+
+use super::{EnvArgs, emit};
+
+#[derive(clap::Subcommand, Debug)]
+pub enum TopologyCommand {
+    /// Train on the benchmark's (object, objective) -> topologies with feature noise; report
+    /// held-out accuracy.
+    Train(TrainArgs),
+    /// The network's topology probabilities for an object and an objective.
+    Predict(PredictArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TrainArgs {
+    #[command(flatten)]
+    pub env: EnvArgs,
+    /// Where to write the network (safetensors).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Noisy samples per (object, objective) pair; a fifth of them are held out.
+    #[arg(long, default_value_t = 50)]
+    pub samples: usize,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PredictArgs {
+    #[command(flatten)]
+    pub env: EnvArgs,
+    #[arg(long)]
+    pub model: PathBuf,
+    #[arg(long)]
+    pub object: String,
+    /// lift, pull, press, twist, lever, wrap_grasp or handle_grasp.
+    #[arg(long)]
+    pub objective: String,
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Network input: object features (sizes in decimetres) and a one-hot objective.
+fn input(object: &Object, objective: Objective, noise: Option<&mut Noise>) -> Vec<f32> {
+    let mut features = object.features();
+    for size in &mut features[..3] {
+        *size *= 10.0;
+    }
+    if let Some(noise) = noise {
+        // Sizes and mass, as a depth camera would misjudge them.
+        for value in &mut features[..4] {
+            *value *= 1.0 + 0.1 * noise.normal();
+        }
+        features[4] += 0.05 * noise.normal();
+    }
+    let mut out = features.to_vec();
+    out.extend(
+        Objective::ALL
+            .iter()
+            .map(|&o| if o == objective { 1.0 } else { 0.0 }),
+    );
+    out
+}
+
+fn input_names() -> Vec<String> {
+    OBJECT_FEATURES
+        .iter()
+        .map(|f| f.to_string())
+        .chain(
+            Objective::ALL
+                .iter()
+                .map(|o| format!("objective_{}", o.name())),
+        )
+        .collect()
+}
+
+fn labels(benchmark: &Benchmark) -> BTreeMap<(String, Objective), BTreeSet<Topology>> {
+    let mut pairs: BTreeMap<(String, Objective), BTreeSet<Topology>> = BTreeMap::new();
+    for task in &benchmark.tasks {
+        pairs
+            .entry((task.object.clone(), task.objective))
+            .or_default()
+            .insert(task.topology);
+    }
+    pairs
+}
+
+pub fn run(command: TopologyCommand) -> anyhow::Result<()> {
+    match command {
+        TopologyCommand::Train(args) => train(args),
+        TopologyCommand::Predict(args) => predict(args),
+    }
+}
+
+fn train(args: TrainArgs) -> anyhow::Result<()> {
+    if args.samples < 5 {
+        anyhow::bail!("--samples must be at least 5, got {}", args.samples);
+    }
+    let benchmark = args.env.benchmark()?;
+    let pairs = labels(&benchmark);
+    let mut noise = Noise::new(args.seed);
+    let (mut train, mut held_out) = (Vec::new(), Vec::new());
+    for ((object, objective), topologies) in &pairs {
+        let object = benchmark.object(object).context("benchmark object")?;
+        let label: Vec<f32> = Topology::ALL
+            .iter()
+            .map(|t| if topologies.contains(t) { 1.0 } else { 0.0 })
+            .collect();
+        for k in 0..args.samples {
+            let example = Example {
+                input: input(object, *objective, Some(&mut noise)),
+                label: label.clone(),
+            };
+            if k % 5 == 4 {
+                held_out.push(example)
+            } else {
+                train.push(example)
+            }
+        }
+    }
+    let mut net = TopologyNet::new(input_names().len(), 64, Topology::ALL.len(), args.seed)?;
+    let loss = net.train(&train, 600, 1e-2)?;
+    let report = serde_json::json!({
+        "pairs": pairs.len(),
+        "train_examples": train.len(),
+        "held_out_examples": held_out.len(),
+        "final_loss": loss,
+        "train_accuracy": net.accuracy(&train)?,
+        "held_out_accuracy": net.accuracy(&held_out)?,
+        "model": args.out.display().to_string(),
+    });
+    let outputs: Vec<String> = Topology::ALL.iter().map(|t| t.name().to_string()).collect();
+    net.save(&args.out, &input_names(), &outputs)?;
+    if args.json {
+        emit(&format!("{report}\n"))
+    } else {
+        emit(&format!("{}\n", serde_json::to_string_pretty(&report)?))
+    }
+}
+
+fn predict(args: PredictArgs) -> anyhow::Result<()> {
+    let benchmark = args.env.benchmark()?;
+    let object = benchmark.object(&args.object).with_context(|| {
+        format!(
+            "--object: unknown object {:?} (see `crm tasks`)",
+            args.object
+        )
+    })?;
+    let objective = Objective::ALL
+        .into_iter()
+        .find(|o| o.name() == args.objective)
+        .with_context(|| format!("--objective: unknown objective {:?}", args.objective))?;
+    let (net, inputs, outputs) = TopologyNet::load(&args.model)?;
+    if inputs != input_names() {
+        anyhow::bail!("model {} was trained on other inputs", args.model.display());
+    }
+    let probabilities = net.predict(&[input(object, objective, None)])?.remove(0);
+    let best = probabilities
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(k, _)| outputs[k].clone())
+        .unwrap_or_default();
+    let assigned: Vec<&str> = labels(&benchmark)
+        .get(&(object.name.clone(), objective))
+        .map(|set| set.iter().map(|t| t.name()).collect())
+        .unwrap_or_default();
+    let report = serde_json::json!({
+        "object": object.name,
+        "objective": objective.name(),
+        "topology": best,
+        "probabilities": outputs.iter().cloned().zip(probabilities.iter().copied()).collect::<BTreeMap<_, _>>(),
+        "benchmark_topologies": assigned,
+    });
+    emit(&format!(
+        "{}\n",
+        if args.json {
+            report.to_string()
+        } else {
+            serde_json::to_string_pretty(&report)?
+        }
+    ))
+}
