@@ -23,6 +23,9 @@ pub struct EvalArgs {
     pub episodes: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Evaluate on one task (id) instead of random tasks.
+    #[arg(long)]
+    pub task: Option<String>,
     #[arg(long)]
     pub json: bool,
 }
@@ -66,7 +69,15 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     };
     let mut ppo = Ppo::new(net.layout(), config, 0)?;
     ppo.net = net;
-    let env = GraspEnv::new(benchmark.clone(), args.env.config());
+    let mut env = GraspEnv::new(benchmark.clone(), args.env.config());
+    if let Some(id) = &args.task {
+        let index = benchmark
+            .tasks
+            .iter()
+            .position(|t| &t.id == id)
+            .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))?;
+        env.set_task_choice(grasp_sim::TaskChoice::Fixed(index))?;
+    }
     let mut crm_env = crm::CrmEnv::new(machine, env, crm::RewardMode::Crm);
     let mut sums: BTreeMap<Objective, (u64, u64, u64)> = BTreeMap::new();
     for k in 0..args.episodes {
