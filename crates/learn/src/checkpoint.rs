@@ -156,14 +156,9 @@ mod tests {
     }
 
     fn bits(net: &ActorCritic) -> Vec<u32> {
-        net.params()
-            .iter()
-            .flat_map(|(_, v)| {
-                v.as_tensor()
-                    .flatten_all()
-                    .and_then(|t| t.to_vec1::<f32>())
-                    .unwrap_or_default()
-            })
+        net.flat_params()
+            .expect("params")
+            .into_iter()
             .map(f32::to_bits)
             .collect()
     }

@@ -248,6 +248,16 @@ impl ActorCritic {
         Ok(mask.broadcast_mul(&per_dim.unsqueeze(0)?)?.sum(D::Minus1)?)
     }
 
+    /// Every parameter value in [`Self::params`] order, flattened (for comparisons and
+    /// inspection).
+    pub fn flat_params(&self) -> Result<Vec<f32>> {
+        let mut out = Vec::new();
+        for (_, var) in &self.params {
+            out.extend(var.as_tensor().flatten_all()?.to_vec1::<f32>()?);
+        }
+        Ok(out)
+    }
+
     /// The policy's standard deviations, per union dimension.
     pub fn std(&self) -> Result<Vec<f32>> {
         Ok(self.log_std.as_tensor().exp()?.to_vec1()?)
@@ -272,14 +282,9 @@ mod tests {
         let b = ActorCritic::new(layout(), &[16, 16], 7).expect("net");
         let c = ActorCritic::new(layout(), &[16, 16], 8).expect("net");
         let flat = |net: &ActorCritic| -> Vec<u32> {
-            net.params()
-                .iter()
-                .flat_map(|(_, v)| {
-                    v.as_tensor()
-                        .flatten_all()
-                        .and_then(|t| t.to_vec1::<f32>())
-                        .unwrap_or_default()
-                })
+            net.flat_params()
+                .expect("params")
+                .into_iter()
                 .map(f32::to_bits)
                 .collect()
         };

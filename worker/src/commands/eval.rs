@@ -71,11 +71,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     ppo.net = net;
     let mut env = GraspEnv::new(benchmark.clone(), args.env.config());
     if let Some(id) = &args.task {
-        let index = benchmark
-            .tasks
-            .iter()
-            .position(|t| &t.id == id)
-            .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))?;
+        let index = super::task_index(&benchmark, id)?;
         env.set_task_choice(grasp_sim::TaskChoice::Fixed(index))?;
     }
     let mut crm_env = crm::CrmEnv::new(machine, env, crm::RewardMode::Crm);

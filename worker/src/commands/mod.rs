@@ -55,6 +55,15 @@ impl EnvArgs {
     }
 }
 
+/// The index of a task by id, or a message naming the flag and pointing at `crm tasks`.
+pub fn task_index(benchmark: &Benchmark, id: &str) -> anyhow::Result<usize> {
+    benchmark
+        .tasks
+        .iter()
+        .position(|t| t.id == id)
+        .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))
+}
+
 /// Writes to standard output; a closed pipe (`crm tasks | head`) ends the output quietly.
 pub fn emit(text: &str) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();

@@ -75,13 +75,7 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
     } else {
         args.tasks
             .iter()
-            .map(|id| {
-                benchmark
-                    .tasks
-                    .iter()
-                    .position(|t| &t.id == id)
-                    .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))
-            })
+            .map(|id| super::task_index(&benchmark, id))
             .collect::<anyhow::Result<_>>()?
     };
     if args.trace {

@@ -95,13 +95,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let benchmark = args.env.benchmark()?;
     let machine = args.env.machine()?;
     let choice = match &args.task {
-        Some(id) => TaskChoice::Fixed(
-            benchmark
-                .tasks
-                .iter()
-                .position(|t| &t.id == id)
-                .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))?,
-        ),
+        Some(id) => TaskChoice::Fixed(super::task_index(&benchmark, id)?),
         None => TaskChoice::Random,
     };
     let env_count = args.envs.unwrap_or_else(rayon::current_num_threads);
