@@ -2,7 +2,6 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::Context;
 use grasp_sim::benchmark::Objective;
 use grasp_sim::oracle::{Oracle, OracleEpisode, run_episode};
 use grasp_sim::{GraspEnv, TaskChoice};
