@@ -25,7 +25,7 @@ enum Command {
     Tasks(commands::tasks::TasksArgs),
     /// Print the grasping CRM: stages, events, edges and rewards.
     Spec(commands::tasks::SpecArgs),
-    /// Train a policy with PPO inside the grasping CRM (crm-ppo, ippo, lppo).
+    /// Train a policy with PPO inside the grasping CRM (crm-ppo, ippo, lppo) or flat (ppo).
     Train(commands::train::TrainArgs),
     /// Evaluate a checkpoint over random tasks: success and episode length per objective.
     Eval(commands::eval::EvalArgs),

@@ -122,6 +122,27 @@ fn train_writes_a_checkpoint_that_eval_reads_and_refuses_bad_input() {
     let (code, _, stderr) = crm(&["train", "--steps=0", "--out", out]);
     assert_eq!(code, 2);
     assert!(stderr.contains("--steps must be positive"), "{stderr}");
+    let flat = dir.join("flat");
+    let (code, _, stderr) = crm(&[
+        "train",
+        "--algo",
+        "ppo",
+        "--steps",
+        "64",
+        "--out",
+        flat.to_str().expect("path"),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stdout, stderr) = crm(&[
+        "eval",
+        "--checkpoint",
+        flat.join("ppo.safetensors").to_str().expect("path"),
+        "--episodes",
+        "2",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("\"algorithm\":\"ppo\""), "{stdout}");
     let (code, _, stderr) = crm(&["train", "--algo", "crm-sac", "--steps", "10", "--out", out]);
     assert_eq!(code, 2);
     assert!(stderr.contains("not available yet"), "{stderr}");

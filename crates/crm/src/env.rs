@@ -11,7 +11,8 @@ use crate::reward::RewardMode;
 pub struct EnvStep {
     /// The global observation `u_{t+1}`, laid out as the spec's `features`.
     pub observation: Vec<f32>,
-    /// Names of the events that hold in `u_{t+1}` (the machine picks the edge).
+    /// Names of the events that hold in `u_{t+1}` (the machine picks the edge; events it does
+    /// not declare are ignored).
     pub events: Vec<&'static str>,
     /// The episode hit its time limit without reaching a terminal stage.
     pub truncated: bool,
@@ -109,15 +110,13 @@ impl<E: Environment> CrmEnv<E> {
         }
         let (union_action, clipped) = self.machine.expand_action(stage, action)?;
         let env_step = self.env.step(&union_action).map_err(Error::Env)?;
-        let fired = env_step
+        // A machine may use a subset of the environment's events (a flat machine has no
+        // `arrive`); the others are ignored.
+        let fired: Vec<usize> = env_step
             .events
             .iter()
-            .map(|name| {
-                self.machine
-                    .event_id(name)
-                    .ok_or_else(|| Error::UnknownEvent((*name).to_string()))
-            })
-            .collect::<Result<Vec<_>>>()?;
+            .filter_map(|name| self.machine.event_id(name))
+            .collect();
         let outcome = self
             .episode
             .advance(&self.machine, &env_step.observation, &fired)?;

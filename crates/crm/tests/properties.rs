@@ -130,3 +130,42 @@ fn actions_are_masked_scaled_clipped_and_checked() {
     let err = machine.expand_action(grasp, &[0.0, 0.0, 0.0]).unwrap_err();
     assert!(matches!(err, crm::Error::ActionLength { .. }), "{err}");
 }
+
+/// An environment that fires an event the machine does not declare, then `arrive`.
+struct Chatty {
+    steps: usize,
+}
+
+impl crm::Environment for Chatty {
+    fn reset(&mut self, _seed: u64) -> Result<Vec<f32>, String> {
+        self.steps = 0;
+        Ok(vec![1.0, 0.0, 0.0])
+    }
+
+    fn set_stage(&mut self, _stage: &str) {}
+
+    fn step(&mut self, _action: &[f32]) -> Result<crm::EnvStep, String> {
+        self.steps += 1;
+        let events = if self.steps == 1 {
+            vec!["sneeze"]
+        } else {
+            vec!["sneeze", "arrive"]
+        };
+        Ok(crm::EnvStep {
+            observation: vec![0.5, 0.0, 0.0],
+            events,
+            truncated: false,
+        })
+    }
+}
+
+#[test]
+fn events_the_machine_does_not_declare_are_ignored() {
+    let mut env = crm::CrmEnv::new(toy_machine(), Chatty { steps: 0 }, crm::RewardMode::Crm);
+    env.reset(0).unwrap();
+    let first = env.step(&[0.0]).unwrap();
+    assert_eq!(first.event, None);
+    let second = env.step(&[0.0]).unwrap();
+    assert_eq!(second.event.as_deref(), Some("arrive"));
+    assert_eq!(env.machine().stage_name(second.stage), "grasp");
+}

@@ -50,7 +50,7 @@ impl GraspEnv {
             task_index: 0,
             scene: None,
             judge: None,
-            stage: String::new(),
+            stage: "approach".to_string(),
             steps: 0,
             clipped: 0,
             hand_contacts: ContactMetrics::default(),

@@ -83,9 +83,10 @@ impl Judge {
         }
     }
 
-    /// The machine entered a stage; grasp-stage timers run only in `grasp`.
+    /// The machine entered a stage; grasp-stage timers (time-out, drop, crush, success) run
+    /// in every stage but `approach`, so a flat machine's single stage has them too.
     pub fn set_stage(&mut self, stage: &str) {
-        self.in_grasp = stage == "grasp";
+        self.in_grasp = stage != "approach";
     }
 
     /// Progress of the success test in `[0, 1]`.

@@ -1,11 +1,13 @@
 //! The grasping CRM (paper, section IV): approach, grasp, out-of-reach, success and failure,
-//! checked in as `crates/sim/specs/grasping.json`, and the check that a spec fits this
-//! environment's observation and action layout.
+//! checked in as `crates/sim/specs/grasping.json`; the flat machine of the plain-PPO
+//! ablation (`flat.json`); and the check that a spec fits this environment's observation and
+//! action layout.
 
 use crate::error::{Error, Result};
 use crate::observation::{ACTIONS, FEATURES};
 
 const BUILTIN: &str = include_str!("../specs/grasping.json");
+const FLAT: &str = include_str!("../specs/flat.json");
 
 /// The built-in grasping spec.
 pub fn grasping_spec() -> crm::Spec {
@@ -21,6 +23,17 @@ pub fn grasping_machine() -> crm::Machine {
     match crm::Machine::from_spec(grasping_spec()) {
         Ok(machine) => machine,
         Err(err) => panic!("built-in grasping spec is invalid: {err}"),
+    }
+}
+
+/// The flat, unstaged machine of the plain-PPO ablation: one stage with every action and
+/// the whole observation, the sum of the staged machine's reward terms, and the same terminal
+/// outcomes and rewards (`crates/sim/specs/flat.json`).
+pub fn flat_spec() -> crm::Spec {
+    match crm::Spec::from_json(FLAT, "crates/sim/specs/flat.json") {
+        Ok(spec) => spec,
+        // The built-in spec is checked by the crate's tests.
+        Err(err) => panic!("built-in flat spec is invalid: {err}"),
     }
 }
 

@@ -129,3 +129,16 @@ fn a_spec_that_does_not_fit_the_environment_is_refused() {
         .to_string();
     assert!(err.contains("teleport"), "{err}");
 }
+
+#[test]
+fn the_flat_ablation_spec_is_one_stage_with_every_action() {
+    let spec = grasp_sim::spec::flat_spec();
+    check_compatible(&spec).expect("flat spec fits the environment");
+    let machine = crm::Machine::from_spec(spec).expect("valid");
+    let task = machine.initial();
+    assert_eq!(machine.action_dims(task).count(), 8);
+    let stages: Vec<usize> = (0..machine.stage_count())
+        .filter(|&s| !machine.is_terminal(s))
+        .collect();
+    assert_eq!(stages, vec![task]);
+}

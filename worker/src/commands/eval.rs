@@ -50,7 +50,13 @@ struct Report {
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let benchmark = args.env.benchmark()?;
-    let machine = args.env.machine()?;
+    // The flat ablation ("ppo") runs in its own machine.
+    let algorithm = Checkpoint::read_header(&args.checkpoint)?.algorithm;
+    let machine = if algorithm == "ppo" {
+        args.env.machine_or(grasp_sim::spec::flat_spec())?
+    } else {
+        args.env.machine()?
+    };
     let (net, header) = Checkpoint::load(
         &args.checkpoint,
         &machine.spec().hash(),

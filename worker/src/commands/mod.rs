@@ -37,10 +37,16 @@ impl EnvArgs {
         }))
     }
 
+    /// The machine from `--spec`, or the built-in grasping machine.
     pub fn machine(&self) -> anyhow::Result<crm::Machine> {
+        self.machine_or(grasp_sim::spec::grasping_spec())
+    }
+
+    /// The machine from `--spec`, or `default`.
+    pub fn machine_or(&self, default: crm::Spec) -> anyhow::Result<crm::Machine> {
         let spec = match &self.spec {
             Some(path) => crm::Spec::load(path).context("loading the crm spec")?,
-            None => grasp_sim::spec::grasping_spec(),
+            None => default,
         };
         grasp_sim::spec::check_compatible(&spec)?;
         Ok(crm::Machine::from_spec(spec)?)

@@ -12,7 +12,7 @@ use grasp_sim::{GraspEnv, TaskChoice};
 
 use super::EnvArgs;
 
-/// The learners by name. `crm-sac` and flat `ppo` come with the rest of the learners issue.
+/// The learners by name. `crm-sac` comes with the rest of the learners issue.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Algorithm {
     /// PPO with intra-stage and transition rewards (the paper's method).
@@ -23,7 +23,7 @@ pub enum Algorithm {
     Lppo,
     /// SAC inside the CRM (not available yet).
     CrmSac,
-    /// PPO on the flat, unstaged problem (not available yet).
+    /// PPO on the flat, unstaged machine (`crates/sim/specs/flat.json`): the ablation.
     Ppo,
 }
 
@@ -77,11 +77,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.steps <= 0 {
         bail!("--steps must be positive, got {}", args.steps);
     }
-    if matches!(args.algo, Algorithm::CrmSac | Algorithm::Ppo) {
-        bail!(
-            "--algo {} is not available yet; use crm-ppo, ippo or lppo",
-            args.algo.name()
-        );
+    if args.algo == Algorithm::CrmSac {
+        bail!("--algo crm-sac is not available yet; use crm-ppo, ippo, lppo or ppo");
     }
     let config: PpoConfig = match &args.config {
         Some(path) => {
@@ -93,7 +90,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     };
     config.validate()?;
     let benchmark = args.env.benchmark()?;
-    let machine = args.env.machine()?;
+    let machine = match args.algo {
+        Algorithm::Ppo => args.env.machine_or(grasp_sim::spec::flat_spec())?,
+        _ => args.env.machine()?,
+    };
     let choice = match &args.task {
         Some(id) => TaskChoice::Fixed(super::task_index(&benchmark, id)?),
         None => TaskChoice::Random,
