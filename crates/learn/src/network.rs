@@ -9,6 +9,7 @@ use candle_core::{D, DType, Device, Tensor, Var};
 use candle_nn::{Linear, Module};
 
 use crate::error::{Error, Result};
+use crate::noise::Noise;
 
 /// Input and output sizes of the networks, from a machine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -35,26 +36,11 @@ impl Layout {
     }
 }
 
-/// A small deterministic generator for weight initialization (SplitMix64), so the same seed
-/// gives bitwise-identical networks on every machine.
-struct Init(u64);
-
-impl Init {
-    fn next_f32(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in `[-bound, bound]`.
-    fn uniform(&mut self, n: usize, bound: f32) -> Vec<f32> {
-        (0..n)
-            .map(|_| (2.0 * self.next_f32() - 1.0) * bound)
-            .collect()
-    }
+/// Uniform initial weights in `[-bound, bound]` from the seeded generator.
+fn uniform(noise: &mut Noise, n: usize, bound: f32) -> Vec<f32> {
+    (0..n)
+        .map(|_| (2.0 * noise.unit_f32() - 1.0) * bound)
+        .collect()
 }
 
 /// The actor and the critic, with their parameters in a stable, named order.
@@ -69,7 +55,7 @@ pub struct ActorCritic {
 }
 
 fn layer(
-    init: &mut Init,
+    noise: &mut Noise,
     device: &Device,
     name: &str,
     inputs: usize,
@@ -80,7 +66,7 @@ fn layer(
     // Uniform with the variance of He initialization, scaled by `gain`.
     let bound = gain * (6.0 / inputs as f32).sqrt();
     let weight = Var::from_vec(
-        init.uniform(inputs * outputs, bound),
+        uniform(noise, inputs * outputs, bound),
         (outputs, inputs),
         device,
     )?;
@@ -92,7 +78,7 @@ fn layer(
 }
 
 fn mlp(
-    init: &mut Init,
+    noise: &mut Noise,
     device: &Device,
     prefix: &str,
     widths: &[usize],
@@ -106,7 +92,7 @@ fn mlp(
             // A small last layer keeps the initial policy near its mean and values near zero.
             let gain = if k == last { 0.01 } else { 1.0 };
             layer(
-                init,
+                noise,
                 device,
                 &format!("{prefix}.{k}"),
                 w[0],
@@ -142,7 +128,7 @@ impl ActorCritic {
     /// New networks for `layout` with hidden widths `hidden`, initialized from `seed`.
     pub fn new(layout: Layout, hidden: &[usize], seed: u64) -> Result<Self> {
         let device = Device::Cpu;
-        let mut init = Init(seed);
+        let mut noise = Noise::new(seed);
         let mut params = Vec::new();
         let mut widths = vec![layout.input_width()];
         widths.extend_from_slice(hidden);
@@ -150,8 +136,8 @@ impl ActorCritic {
         actor_widths.push(layout.actions);
         let mut critic_widths = widths;
         critic_widths.push(1);
-        let actor = mlp(&mut init, &device, "actor", &actor_widths, &mut params)?;
-        let critic = mlp(&mut init, &device, "critic", &critic_widths, &mut params)?;
+        let actor = mlp(&mut noise, &device, "actor", &actor_widths, &mut params)?;
+        let critic = mlp(&mut noise, &device, "critic", &critic_widths, &mut params)?;
         let log_std = Var::from_vec(vec![-0.5f32; layout.actions], layout.actions, &device)?;
         params.push(("actor.log_std".to_string(), log_std.clone()));
         Ok(Self {

@@ -10,7 +10,7 @@ use candle_core::{D, DType, Device, Tensor, Var};
 use candle_nn::{AdamW, Linear, Module, Optimizer, ParamsAdamW};
 
 use crate::error::{Error, Result};
-use crate::ppo::Noise;
+use crate::noise::Noise;
 
 const FORMAT: &str = "crm-grasp-topology/1";
 const HEADER_KEY: &str = "crm_grasp_topology";

@@ -4,8 +4,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use anyhow::Context;
-use crm_learn::ppo::Noise;
-use crm_learn::{Example, TopologyNet};
+use crm_learn::{Example, Noise, TopologyNet};
 use grasp_sim::Benchmark;
 use grasp_sim::benchmark::{OBJECT_FEATURES, Object, Objective, Topology};
 
