@@ -112,19 +112,12 @@ fn friction_opposes_a_sideways_push_below_the_static_limit() {
     }
 }
 
-fn friction_opposes_push(box_first: bool) {
-    let mut scene = box_scene_ordered(HALF, box_first);
-    let pair = scene
-        .world
-        .narrow_phase
-        .contact_pairs()
-        .next()
-        .map(|p| (p.collider1, p.collider2));
-    eprintln!("box_first={box_first} pair={pair:?}");
+/// Lets the box settle for 0.5 s, then pushes it along x with `push` newtons for 0.25 s;
+/// returns the table's contacts on it at the end.
+fn settle_then_push(scene: &mut BoxScene, push: f32) -> ContactMetrics {
     for _ in 0..120 {
         scene.world.step();
     }
-    let push = 1.0;
     let mut metrics = ContactMetrics::default();
     for _ in 0..60 {
         if let Some(body) = scene.world.bodies.get_mut(scene.body) {
@@ -132,18 +125,15 @@ fn friction_opposes_push(box_first: bool) {
             body.add_force(Vec3::new(push, 0.0, 0.0), true);
         }
         scene.world.step();
-        metrics = table_contacts(&scene);
+        metrics = table_contacts(scene);
     }
-    let pair = scene
-        .world
-        .narrow_phase
-        .contact_pairs()
-        .next()
-        .map(|p| (p.collider1, p.collider2));
-    eprintln!(
-        "box_first={box_first} pair={pair:?} force={:?}",
-        metrics.force
-    );
+    metrics
+}
+
+fn friction_opposes_push(box_first: bool) {
+    let mut scene = box_scene_ordered(HALF, box_first);
+    let push = 1.0;
+    let metrics = settle_then_push(&mut scene, push);
     assert!(
         (metrics.force.x + push).abs() < 0.1,
         "friction on the box {:?} should be -{push} N along x",
@@ -163,18 +153,7 @@ fn friction_opposes_push(box_first: bool) {
 #[test]
 fn a_sliding_box_is_outside_the_cone() {
     let mut scene = box_scene(HALF);
-    for _ in 0..120 {
-        scene.world.step();
-    }
-    let mut metrics = ContactMetrics::default();
-    for _ in 0..60 {
-        if let Some(body) = scene.world.bodies.get_mut(scene.body) {
-            body.reset_forces(true);
-            body.add_force(Vec3::new(6.0, 0.0, 0.0), true);
-        }
-        scene.world.step();
-        metrics = table_contacts(&scene);
-    }
+    let metrics = settle_then_push(&mut scene, 6.0);
     // The solver clamps friction to the cone: a sliding contact sits on its boundary.
     assert!(
         !metrics.in_cone(0.05),
