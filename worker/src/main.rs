@@ -1,6 +1,8 @@
 //! `crm`: the command-line front of crm-grasp. Thin glue over the library crates.
 
 mod commands;
+mod jobs;
+mod service;
 
 use clap::{Parser, Subcommand};
 
@@ -17,8 +19,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Start crm-grasp on this machine (today: the scripted oracle over the benchmark).
-    Up(commands::oracle::OracleArgs),
+    /// Start crm-grasp on this machine: the coordinator (REST, gRPC, sqlite) and local workers.
+    Up(commands::service::UpArgs),
+    /// A rollout worker: lease jobs from a coordinator and run them.
+    Worker(commands::service::WorkerArgs),
+    /// Serve a checkpoint's policy over gRPC (the `Policy` service).
+    ServePolicy(commands::service::ServePolicyArgs),
     /// Run the scripted oracle (no learning) over the benchmark's tasks.
     Oracle(commands::oracle::OracleArgs),
     /// List the benchmark: objects, objectives, topologies and tasks.
@@ -40,12 +46,9 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Up(args) => {
-            eprintln!(
-                "crm up: the training service is not built yet; running the scripted oracle over the benchmark"
-            );
-            commands::oracle::run(args)
-        }
+        Command::Up(args) => commands::service::up(args),
+        Command::Worker(args) => commands::service::worker(args),
+        Command::ServePolicy(args) => commands::service::serve_policy(args),
         Command::Oracle(args) => commands::oracle::run(args),
         Command::Tasks(args) => commands::tasks::run(args),
         Command::Spec(args) => commands::tasks::run_spec(args),

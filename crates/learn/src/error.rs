@@ -19,6 +19,9 @@ pub enum Error {
     /// The environment or the machine refused a step.
     #[error("environment: {0}")]
     Env(String),
+    /// A PPO setting out of its domain; names the field.
+    #[error(transparent)]
+    Settings(#[from] crm_api::ConfigError),
     /// A configuration value out of its domain; names the field.
     #[error("invalid config field {field}: {message}")]
     Config {

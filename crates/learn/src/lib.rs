@@ -5,7 +5,7 @@
 //! (safetensors with a JSON header). Synchronous; no I/O but checkpoint files.
 
 pub mod checkpoint;
-pub mod config;
+pub mod early_stop;
 pub mod error;
 pub mod gae;
 pub mod network;
@@ -15,7 +15,8 @@ pub mod rollout;
 pub mod topology;
 
 pub use checkpoint::{Checkpoint, CheckpointHeader};
-pub use config::{EarlyStop, PpoConfig};
+pub use crm_api::PpoConfig;
+pub use early_stop::EarlyStop;
 pub use error::{Error, Result};
 pub use network::{ActorCritic, Layout};
 pub use noise::Noise;

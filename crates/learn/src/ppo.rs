@@ -7,12 +7,12 @@
 use candle_core::Tensor;
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 
-use crate::config::PpoConfig;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gae::{StepRecord, gae, normalize};
 use crate::network::{ActorCritic, Layout};
 use crate::noise::Noise;
 use crate::rollout::Rollout;
+use crm_api::PpoConfig;
 
 /// What one update reports (CleanRL's names).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -52,6 +52,27 @@ impl Ppo {
             optimizer,
             noise: Noise::new(seed ^ 0xA5A5_5A5A),
         })
+    }
+
+    /// Copies the weights of `other` (same layout and widths) into this learner's networks,
+    /// keeping the optimizer bound to them: how a run resumes from a checkpoint.
+    pub fn load_weights(&mut self, other: &ActorCritic) -> Result<()> {
+        if other.layout() != self.net.layout() || other.hidden() != self.net.hidden() {
+            return Err(Error::Config {
+                field: "hidden",
+                message: format!(
+                    "checkpoint network {:?} {:?} does not match {:?} {:?}",
+                    other.layout(),
+                    other.hidden(),
+                    self.net.layout(),
+                    self.net.hidden()
+                ),
+            });
+        }
+        for ((_, mine), (_, theirs)) in self.net.params().iter().zip(other.params()) {
+            mine.set(theirs.as_tensor())?;
+        }
+        Ok(())
     }
 
     /// Samples (or, `deterministic`, takes the means of) the policy at a batch of abstract

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod eval;
 pub mod oracle;
+pub mod service;
 pub mod tasks;
 pub mod topology;
 pub mod train;
@@ -16,7 +17,7 @@ use anyhow::Context;
 use grasp_sim::{Benchmark, SimConfig};
 
 /// Options every environment-running command shares.
-#[derive(clap::Args, Clone, Debug)]
+#[derive(clap::Args, Clone, Debug, Default)]
 pub struct EnvArgs {
     /// A benchmark file to use instead of the built-in one.
     #[arg(long, value_name = "FILE")]

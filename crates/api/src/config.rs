@@ -1,8 +1,14 @@
 //! PPO configuration with the paper's defaults (section V-B-2) and CleanRL's names.
 
-use serde::{Deserialize, Serialize};
+/// A configuration value out of its domain; names the field.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("invalid config field {field}: {message}")]
+pub struct ConfigError {
+    pub field: &'static str,
+    pub message: String,
+}
 
-use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
 
 /// Knobs of PPO with the CRM (paper, section III-B).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -72,9 +78,9 @@ impl PpoConfig {
     }
 
     /// Refuses values out of their domain, naming the field.
-    pub fn validate(&self) -> Result<()> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         let bad = |field: &'static str, message: &str| {
-            Err(Error::Config {
+            Err(ConfigError {
                 field,
                 message: message.to_string(),
             })
@@ -119,47 +125,6 @@ impl PpoConfig {
     }
 }
 
-/// The paper's early-stop rule: stop when the most recent `window` episodes reach a success
-/// rate of at least `threshold` (section V-B-2).
-#[derive(Clone, Debug)]
-pub struct EarlyStop {
-    window: usize,
-    threshold: f32,
-    recent: std::collections::VecDeque<bool>,
-}
-
-impl EarlyStop {
-    pub fn new(window: usize, threshold: f32) -> Self {
-        Self {
-            window: window.max(1),
-            threshold,
-            recent: std::collections::VecDeque::with_capacity(window.max(1)),
-        }
-    }
-
-    /// Records an episode; returns whether training should stop now.
-    pub fn record(&mut self, success: bool) -> bool {
-        if self.recent.len() == self.window {
-            self.recent.pop_front();
-        }
-        self.recent.push_back(success);
-        self.should_stop()
-    }
-
-    /// A full window at or above the threshold.
-    pub fn should_stop(&self) -> bool {
-        self.recent.len() == self.window && self.success_rate() >= self.threshold
-    }
-
-    /// Success rate over the episodes in the window so far.
-    pub fn success_rate(&self) -> f32 {
-        if self.recent.is_empty() {
-            return 0.0;
-        }
-        self.recent.iter().filter(|&&s| s).count() as f32 / self.recent.len() as f32
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -173,24 +138,6 @@ mod tests {
         assert!((config.learning_rate_at(0.69) - 2.7e-5).abs() < 1e-12);
         assert!((config.learning_rate_at(0.7) - 2.4e-5).abs() < 1e-12);
         assert!((config.learning_rate_at(1.0) - 2.4e-5).abs() < 1e-12);
-    }
-
-    #[test]
-    fn early_stop_needs_a_full_window_at_99_percent() {
-        let mut rule = EarlyStop::new(100, 0.99);
-        for _ in 0..99 {
-            assert!(!rule.record(true), "a window of 99 is not full");
-        }
-        assert!(rule.record(true));
-        // One failure in the last 100 is still 99%; a second drops below.
-        assert!(rule.record(false));
-        assert!(!rule.record(false));
-        for _ in 0..98 {
-            rule.record(true);
-        }
-        assert!(!rule.should_stop(), "two failures still in the window");
-        assert!(rule.record(true), "one failure left in the window: 99%");
-        assert!((rule.success_rate() - 0.99).abs() < 1e-6);
     }
 
     #[test]

@@ -1,0 +1,203 @@
+//! Job specifications and reports, as the REST API, the gRPC protocol (as JSON) and the CLI
+//! see them.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::PpoConfig;
+
+/// The learners by name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Algorithm {
+    /// PPO with intra-stage and transition rewards (the paper's method).
+    CrmPpo,
+    /// PPO with the stage-wise sparse transition rewards only.
+    Ippo,
+    /// PPO with the hierarchical dense intra-stage rewards only.
+    Lppo,
+    /// SAC inside the CRM (not available yet).
+    CrmSac,
+    /// PPO on the flat, unstaged machine (`crates/sim/specs/flat.json`): the ablation.
+    Ppo,
+}
+
+impl Algorithm {
+    pub const ALL: [Algorithm; 5] = [
+        Algorithm::CrmPpo,
+        Algorithm::Ippo,
+        Algorithm::Lppo,
+        Algorithm::CrmSac,
+        Algorithm::Ppo,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Algorithm::CrmPpo => "crm-ppo",
+            Algorithm::Ippo => "ippo",
+            Algorithm::Lppo => "lppo",
+            Algorithm::CrmSac => "crm-sac",
+            Algorithm::Ppo => "ppo",
+        }
+    }
+
+    /// The algorithm named `name`, as in checkpoints and the API.
+    pub fn parse(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|a| a.name() == name)
+    }
+
+    /// Whether this build can train it.
+    pub fn available(self) -> bool {
+        self != Algorithm::CrmSac
+    }
+}
+
+/// A training job's parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainSpec {
+    pub algorithm: Algorithm,
+    /// Environment steps to train for in total.
+    pub steps: u64,
+    #[serde(default)]
+    pub seed: u64,
+    /// One task id, or random tasks over the benchmark.
+    #[serde(default)]
+    pub task: Option<String>,
+    /// Environments stepped in parallel (default: one per core of the worker). Results
+    /// depend on this number and the seed, not on the thread count.
+    #[serde(default)]
+    pub envs: Option<usize>,
+    /// PPO settings; defaults cite the paper.
+    #[serde(default)]
+    pub config: PpoConfig,
+}
+
+/// An evaluation job's parameters (the checkpoint is given beside them).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EvalSpec {
+    /// Episodes, each on a task drawn with the seed. Paper: 1,000.
+    #[serde(default = "default_episodes")]
+    pub episodes: u64,
+    #[serde(default)]
+    pub seed: u64,
+    /// One task id, or random tasks over the benchmark.
+    #[serde(default)]
+    pub task: Option<String>,
+}
+
+fn default_episodes() -> u64 {
+    1000
+}
+
+impl Default for EvalSpec {
+    fn default() -> Self {
+        Self {
+            episodes: default_episodes(),
+            seed: 0,
+            task: None,
+        }
+    }
+}
+
+/// What one training iteration (a rollout and an update) reports.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Iteration {
+    pub iteration: u64,
+    /// Environment steps trained so far, over the whole run.
+    pub steps: u64,
+    pub wall_s: f64,
+    pub steps_per_s: f64,
+    /// Episodes that ended in this iteration, and how many of them succeeded.
+    pub episodes: u64,
+    pub successes: u64,
+    pub success_rate_last_100: f64,
+    pub mean_return: f64,
+    /// The return split into intra-stage and transition rewards, per episode.
+    pub mean_intra_return: f64,
+    pub mean_transition_return: f64,
+    pub mean_episode_length: f64,
+    /// Share of this iteration's steps taken in each stage.
+    pub stage_mix: BTreeMap<String, f64>,
+    pub policy_loss: f64,
+    pub value_loss: f64,
+    pub entropy: f64,
+    pub approx_kl: f64,
+    pub clipfrac: f64,
+    pub learning_rate: f64,
+}
+
+/// One row of Table I.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    pub success_rate: f64,
+    pub mean_episode_length: f64,
+    pub episodes: u64,
+}
+
+/// The whole table for one checkpoint.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvalReport {
+    pub algorithm: String,
+    pub trained_steps: u64,
+    pub episodes: u64,
+    pub seed: u64,
+    pub success_rate: f64,
+    pub mean_episode_length: f64,
+    pub per_objective: BTreeMap<String, Row>,
+}
+
+impl EvalReport {
+    /// The report as a Markdown table.
+    pub fn markdown(&self) -> String {
+        let mut text = format!(
+            "{} ({} steps): success {:.3}, mean length {:.1} over {} episodes (seed {})\n\n| objective | success | episode length |\n| --- | --- | --- |\n",
+            self.algorithm,
+            self.trained_steps,
+            self.success_rate,
+            self.mean_episode_length,
+            self.episodes,
+            self.seed
+        );
+        for (name, r) in &self.per_objective {
+            text.push_str(&format!(
+                "| {name} | {:.2} | {:.1} |\n",
+                r.success_rate, r.mean_episode_length
+            ));
+        }
+        text.push_str(&format!(
+            "| overall | {:.2} | {:.1} |\n",
+            self.success_rate, self.mean_episode_length
+        ));
+        text
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn algorithms_round_trip_by_name() {
+        for algorithm in Algorithm::ALL {
+            assert_eq!(Algorithm::parse(algorithm.name()), Some(algorithm));
+            let json = serde_json::to_string(&algorithm).expect("json");
+            assert_eq!(json, format!("\"{}\"", algorithm.name()));
+        }
+        assert_eq!(Algorithm::parse("dqn"), None);
+    }
+
+    #[test]
+    fn specs_take_defaults_and_refuse_unknown_fields() {
+        let spec: TrainSpec =
+            serde_json::from_str(r#"{"algorithm": "lppo", "steps": 10}"#).expect("spec");
+        assert_eq!(spec.config, PpoConfig::default());
+        assert!(
+            serde_json::from_str::<TrainSpec>(r#"{"algorithm":"lppo","steps":1,"x":1}"#).is_err()
+        );
+        let eval: EvalSpec = serde_json::from_str("{}").expect("eval");
+        assert_eq!(eval.episodes, 1000);
+    }
+}

@@ -1,0 +1,13 @@
+//! The contract between the crm-grasp coordinator (`crm-server`) and its workers (`crm`):
+//! job specifications and reports as serde types, the PPO configuration with the paper's
+//! defaults, the benchmark catalog (task ids, objectives, topologies) read from the
+//! benchmark's data file. Light on purpose (serde, no async runtime): the coordinator, the
+//! workers and the learners all link it. The gRPC protocol is in `crm-proto`.
+
+pub mod catalog;
+pub mod config;
+pub mod jobs;
+
+pub use catalog::Catalog;
+pub use config::{ConfigError, PpoConfig};
+pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, Row, TrainSpec};

@@ -1,0 +1,249 @@
+//! `/api/v1/jobs`: submit, list, get, cancel and re-run training and evaluation jobs.
+//! Submissions are validated field by field against the learner's configuration and the
+//! benchmark catalog before anything is stored.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{Path, Query, State};
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use crm_api::{EvalSpec, TrainSpec};
+use serde::de::DeserializeOwned;
+use serde_json::Value;
+
+use super::error::{ApiError, parse_id};
+use crate::AppState;
+use crate::store::{JobFilter, NewJob};
+
+/// Largest training budget a job may ask for.
+const MAX_STEPS: u64 = 10_000_000_000;
+const MAX_EPISODES: u64 = 1_000_000;
+const MAX_ENVS: usize = 1024;
+
+const STATES: [&str; 5] = ["queued", "running", "succeeded", "failed", "cancelled"];
+
+fn decode<T: DeserializeOwned>(value: Value, prefix: &str) -> Result<T, ApiError> {
+    serde_path_to_error::deserialize(value).map_err(|err| {
+        let path = err.path().to_string();
+        let field = match (prefix, path.as_str()) {
+            (p, ".") => p.trim_end_matches('.').to_string(),
+            (p, path) => format!("{p}{path}"),
+        };
+        ApiError::invalid(field, err.inner().to_string())
+    })
+}
+
+/// A validated submission.
+struct Submission {
+    kind: &'static str,
+    algorithm: String,
+    task: Option<String>,
+    spec: String,
+    checkpoint_id: Option<i64>,
+}
+
+async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError> {
+    let Value::Object(mut fields) = body else {
+        return Err(ApiError::invalid("body", "expected a JSON object"));
+    };
+    let kind = match fields.remove("kind") {
+        None => return Err(ApiError::invalid("kind", "missing; \"train\" or \"eval\"")),
+        Some(Value::String(kind)) => kind,
+        Some(_) => return Err(ApiError::invalid("kind", "must be \"train\" or \"eval\"")),
+    };
+    let catalog = &state.catalog;
+    let check_task = |task: &Option<String>| match task {
+        Some(id) if catalog.task(id).is_none() => Err(ApiError::invalid(
+            "task",
+            format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
+        )),
+        _ => Ok(()),
+    };
+    match kind.as_str() {
+        "train" => {
+            let spec: TrainSpec = decode(Value::Object(fields), "")?;
+            if !spec.algorithm.available() {
+                return Err(ApiError::invalid(
+                    "algorithm",
+                    format!("{} is not available in this build", spec.algorithm.name()),
+                ));
+            }
+            if spec.steps == 0 || spec.steps > MAX_STEPS {
+                return Err(ApiError::invalid(
+                    "steps",
+                    format!("must be between 1 and {MAX_STEPS}"),
+                ));
+            }
+            if spec.envs.is_some_and(|n| n == 0 || n > MAX_ENVS) {
+                return Err(ApiError::invalid(
+                    "envs",
+                    format!("must be between 1 and {MAX_ENVS}"),
+                ));
+            }
+            check_task(&spec.task)?;
+            spec.config
+                .validate()
+                .map_err(|e| ApiError::invalid(format!("config.{}", e.field), e.message))?;
+            Ok(Submission {
+                kind: "train",
+                algorithm: spec.algorithm.name().to_string(),
+                task: spec.task.clone(),
+                spec: serde_json::to_string(&spec).map_err(ApiError::internal)?,
+                checkpoint_id: None,
+            })
+        }
+        "eval" => {
+            let checkpoint_id = match fields.remove("checkpoint_id") {
+                Some(Value::Number(n)) => n.as_i64().filter(|id| *id > 0),
+                None => return Err(ApiError::invalid("checkpoint_id", "missing")),
+                Some(_) => None,
+            }
+            .ok_or_else(|| ApiError::invalid("checkpoint_id", "must be a positive integer"))?;
+            let spec: EvalSpec = decode(Value::Object(fields), "")?;
+            if spec.episodes == 0 || spec.episodes > MAX_EPISODES {
+                return Err(ApiError::invalid(
+                    "episodes",
+                    format!("must be between 1 and {MAX_EPISODES}"),
+                ));
+            }
+            check_task(&spec.task)?;
+            let checkpoint = state.store.checkpoint(checkpoint_id).await.map_err(|_| {
+                ApiError::invalid("checkpoint_id", format!("no checkpoint {checkpoint_id}"))
+            })?;
+            Ok(Submission {
+                kind: "eval",
+                algorithm: checkpoint.algorithm,
+                task: spec.task.clone(),
+                spec: serde_json::to_string(&spec).map_err(ApiError::internal)?,
+                checkpoint_id: Some(checkpoint_id),
+            })
+        }
+        other => Err(ApiError::invalid(
+            "kind",
+            format!("{other:?}: must be \"train\" or \"eval\""),
+        )),
+    }
+}
+
+pub async fn create(
+    State(state): State<Arc<AppState>>,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<Response, ApiError> {
+    let body = body.map_err(|e| ApiError {
+        status: e.status(),
+        code: "bad_body",
+        message: e.body_text(),
+        field: Some("body".into()),
+    })?;
+    let value: Value = serde_json::from_slice(&body)
+        .map_err(|e| ApiError::invalid("body", format!("not JSON: {e}")))?;
+    let submission = validate(&state, value).await?;
+    let job = state
+        .store
+        .create_job(NewJob {
+            kind: submission.kind,
+            algorithm: &submission.algorithm,
+            task: submission.task.as_deref(),
+            spec: &submission.spec,
+            checkpoint_id: submission.checkpoint_id,
+            rerun_of: None,
+        })
+        .await
+        .map_err(|e| ApiError::store("job", e))?;
+    tracing::info!(job = job.id, kind = job.kind, "job submitted");
+    state.notify();
+    Ok((StatusCode::CREATED, Json(job)).into_response())
+}
+
+pub async fn list(
+    State(state): State<Arc<AppState>>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    let mut filter = JobFilter::default();
+    for (key, value) in query {
+        match key.as_str() {
+            "state" if STATES.contains(&value.as_str()) => filter.state = Some(value),
+            "state" => {
+                return Err(ApiError::invalid(
+                    "state",
+                    format!("one of {}", STATES.join(", ")),
+                ));
+            }
+            "kind" if value == "train" || value == "eval" => filter.kind = Some(value),
+            "kind" => return Err(ApiError::invalid("kind", "\"train\" or \"eval\"")),
+            "algorithm" if crm_api::Algorithm::parse(&value).is_some() => {
+                filter.algorithm = Some(value)
+            }
+            "algorithm" => return Err(ApiError::invalid("algorithm", "unknown algorithm")),
+            "limit" => {
+                filter.limit = value
+                    .parse()
+                    .ok()
+                    .filter(|n| (1..=10_000).contains(n))
+                    .ok_or_else(|| ApiError::invalid("limit", "an integer in 1..=10000"))?;
+            }
+            other => return Err(ApiError::invalid(other, "unknown query parameter")),
+        }
+    }
+    let jobs = state
+        .store
+        .jobs(&filter)
+        .await
+        .map_err(|e| ApiError::store("job", e))?;
+    Ok(Json(serde_json::json!({ "jobs": jobs })).into_response())
+}
+
+pub async fn get(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let job = state
+        .store
+        .job(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("job", e))?;
+    Ok(Json(job).into_response())
+}
+
+pub async fn cancel(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let job = state
+        .store
+        .cancel_job(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("job", e))?;
+    tracing::info!(job = job.id, "job cancelled");
+    Ok(Json(job).into_response())
+}
+
+/// Queues a copy of a job's parameters as a new job.
+pub async fn rerun(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let old = state
+        .store
+        .job(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("job", e))?;
+    let job = state
+        .store
+        .create_job(NewJob {
+            kind: &old.kind,
+            algorithm: &old.algorithm,
+            task: old.task.as_deref(),
+            spec: &old.spec,
+            checkpoint_id: old.checkpoint_id,
+            rerun_of: Some(old.id),
+        })
+        .await
+        .map_err(|e| ApiError::store("job", e))?;
+    state.notify();
+    Ok((StatusCode::CREATED, Json(job)).into_response())
+}

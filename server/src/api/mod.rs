@@ -1,0 +1,116 @@
+//! The REST API under `/api/v1` (axum): jobs, runs with their metric series, evaluations,
+//! checkpoints, workers and the task catalog; `GET /healthz`; the OpenAPI document at
+//! `/api/v1/openapi.json`. Errors are JSON `{"error": {"code", "message", "field"}}`.
+
+mod error;
+mod jobs;
+mod resources;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::extract::{Request, State};
+use axum::http::{HeaderMap, Method};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+
+pub use error::ApiError;
+
+use crate::AppState;
+
+/// The OpenAPI document, kept beside the code and checked against the routes by a test.
+pub const OPENAPI: &str = include_str!("../../openapi.json");
+
+/// The REST router with its limits and logging.
+pub fn router(state: Arc<AppState>) -> Router {
+    let api = Router::new()
+        .route("/jobs", get(jobs::list).post(jobs::create))
+        .route("/jobs/{id}", get(jobs::get))
+        .route("/jobs/{id}/cancel", post(jobs::cancel))
+        .route("/jobs/{id}/rerun", post(jobs::rerun))
+        .route("/runs", get(resources::runs))
+        .route("/runs/{id}", get(resources::run))
+        .route("/runs/{id}/metrics", get(resources::run_metrics))
+        .route("/evaluations", get(resources::evaluations))
+        .route("/evaluations/{id}", get(resources::evaluation))
+        .route("/checkpoints", get(resources::checkpoints))
+        .route("/checkpoints/{id}", get(resources::checkpoint))
+        .route("/checkpoints/{id}/download", get(resources::download))
+        .route("/workers", get(resources::workers))
+        .route("/tasks", get(resources::tasks))
+        .route("/openapi.json", get(openapi))
+        .fallback(not_found)
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            require_token,
+        ));
+    Router::new()
+        .nest("/api/v1", api)
+        .route("/healthz", get(healthz))
+        .with_state(state.clone())
+        .layer(axum::extract::DefaultBodyLimit::max(
+            state.config.max_body_bytes,
+        ))
+        .layer(tower::limit::GlobalConcurrencyLimitLayer::new(
+            state.config.max_concurrent_requests,
+        ))
+        .layer(tower_http::timeout::TimeoutLayer::with_status_code(
+            axum::http::StatusCode::REQUEST_TIMEOUT,
+            Duration::from_secs(60),
+        ))
+        .layer(tower_http::trace::TraceLayer::new_for_http())
+}
+
+async fn healthz(State(state): State<Arc<AppState>>) -> Response {
+    match state
+        .store
+        .jobs(&crate::store::JobFilter {
+            limit: 1,
+            ..Default::default()
+        })
+        .await
+    {
+        Ok(_) => Json(serde_json::json!({"status": "ok", "version": env!("CARGO_PKG_VERSION")}))
+            .into_response(),
+        Err(err) => ApiError::internal(err).into_response(),
+    }
+}
+
+async fn openapi() -> Response {
+    ([("content-type", "application/json")], OPENAPI).into_response()
+}
+
+async fn not_found() -> ApiError {
+    ApiError::not_found("route", "no such API route")
+}
+
+/// Mutating calls need the bearer token when one is configured.
+async fn require_token(
+    State(state): State<Arc<AppState>>,
+    headers: HeaderMap,
+    request: Request,
+    next: Next,
+) -> Response {
+    if request.method() != Method::GET
+        && let Some(token) = &state.config.token
+        && !bearer_matches(&headers, token)
+    {
+        return ApiError::unauthorized().into_response();
+    }
+    next.run(request).await
+}
+
+/// Whether the `authorization` header carries `Bearer <token>`.
+pub fn bearer_matches(headers: &HeaderMap, token: &str) -> bool {
+    headers
+        .get("authorization")
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes()))
+}
+
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}

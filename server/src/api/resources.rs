@@ -1,0 +1,203 @@
+//! Read-only resources: runs (training jobs with their metric series), evaluations (with
+//! per-objective results), checkpoints (with download), workers and the task catalog.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use axum::Json;
+use axum::body::Body;
+use axum::extract::{Path, Query, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use serde_json::json;
+
+use super::error::{ApiError, parse_id};
+use crate::AppState;
+use crate::store::{Job, JobFilter};
+
+type Res = Result<Response, ApiError>;
+
+async fn job_of_kind(state: &AppState, id: &str, kind: &str) -> Result<Job, ApiError> {
+    let what = if kind == "train" { "run" } else { "evaluation" };
+    let job = state
+        .store
+        .job(parse_id(id)?)
+        .await
+        .map_err(|e| ApiError::store(what, e))?;
+    if job.kind != kind {
+        return Err(ApiError::not_found(
+            "id",
+            format!("job {} is not a {what}", job.id),
+        ));
+    }
+    Ok(job)
+}
+
+fn filter_of(kind: &str, query: &HashMap<String, String>) -> Result<JobFilter, ApiError> {
+    let mut filter = JobFilter {
+        kind: Some(kind.into()),
+        ..JobFilter::default()
+    };
+    for (key, value) in query {
+        match key.as_str() {
+            "algorithm" => filter.algorithm = Some(value.clone()),
+            "state" => filter.state = Some(value.clone()),
+            other => return Err(ApiError::invalid(other, "unknown query parameter")),
+        }
+    }
+    Ok(filter)
+}
+
+pub async fn runs(
+    State(state): State<Arc<AppState>>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Res {
+    let runs = state
+        .store
+        .jobs(&filter_of("train", &query)?)
+        .await
+        .map_err(|e| ApiError::store("run", e))?;
+    Ok(Json(json!({ "runs": runs })).into_response())
+}
+
+/// A run with its metric series, checkpoints, evaluations and recent episodes.
+pub async fn run(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let job = job_of_kind(&state, &id, "train").await?;
+    let store = &state.store;
+    let err = |e| ApiError::store("run", e);
+    let metrics = store.metrics(job.id).await.map_err(err)?;
+    let checkpoints = store.checkpoints(Some(job.id)).await.map_err(err)?;
+    let ids: Vec<i64> = checkpoints.iter().map(|c| c.id).collect();
+    let evaluations: Vec<Job> = store
+        .jobs(&JobFilter {
+            kind: Some("eval".into()),
+            ..JobFilter::default()
+        })
+        .await
+        .map_err(err)?
+        .into_iter()
+        .filter(|e| e.checkpoint_id.is_some_and(|c| ids.contains(&c)))
+        .collect();
+    let episodes = store.episodes(job.id).await.map_err(err)?;
+    Ok(Json(json!({
+        "run": job,
+        "metrics": metrics,
+        "checkpoints": checkpoints,
+        "evaluations": evaluations,
+        "episodes": episodes,
+    }))
+    .into_response())
+}
+
+pub async fn run_metrics(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let job = job_of_kind(&state, &id, "train").await?;
+    let metrics = state
+        .store
+        .metrics(job.id)
+        .await
+        .map_err(|e| ApiError::store("run", e))?;
+    Ok(Json(json!({ "run_id": job.id, "metrics": metrics })).into_response())
+}
+
+pub async fn evaluations(
+    State(state): State<Arc<AppState>>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Res {
+    let evaluations = state
+        .store
+        .jobs(&filter_of("eval", &query)?)
+        .await
+        .map_err(|e| ApiError::store("evaluation", e))?;
+    Ok(Json(json!({ "evaluations": evaluations })).into_response())
+}
+
+pub async fn evaluation(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let job = job_of_kind(&state, &id, "eval").await?;
+    Ok(Json(job).into_response())
+}
+
+pub async fn checkpoints(
+    State(state): State<Arc<AppState>>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Res {
+    let mut job = None;
+    for (key, value) in &query {
+        match key.as_str() {
+            "job_id" => {
+                job = Some(
+                    parse_id(value)
+                        .map_err(|_| ApiError::invalid("job_id", "a positive integer"))?,
+                )
+            }
+            other => return Err(ApiError::invalid(other, "unknown query parameter")),
+        }
+    }
+    let checkpoints = state
+        .store
+        .checkpoints(job)
+        .await
+        .map_err(|e| ApiError::store("checkpoint", e))?;
+    Ok(Json(json!({ "checkpoints": checkpoints })).into_response())
+}
+
+pub async fn checkpoint(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let row = state
+        .store
+        .checkpoint(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("checkpoint", e))?;
+    Ok(Json(row).into_response())
+}
+
+pub async fn download(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let row = state
+        .store
+        .checkpoint(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("checkpoint", e))?;
+    // Checkpoints are small (about a megabyte): read whole.
+    let bytes = tokio::fs::read(state.store.checkpoint_path(&row))
+        .await
+        .map_err(ApiError::internal)?;
+    let body = Body::from(bytes);
+    let name = format!(
+        "{}-job{}-{}.safetensors",
+        row.algorithm, row.job_id, row.steps
+    );
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/octet-stream".to_string()),
+            (header::CONTENT_LENGTH, row.size.to_string()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"{name}\""),
+            ),
+        ],
+        body,
+    )
+        .into_response())
+}
+
+pub async fn workers(State(state): State<Arc<AppState>>) -> Res {
+    let workers = state
+        .store
+        .workers()
+        .await
+        .map_err(|e| ApiError::store("worker", e))?;
+    let now = crate::store::now_ms();
+    let alive_ms = 3 * 1000 * i64::from(state.config.heartbeat_interval_s);
+    let workers: Vec<_> = workers
+        .into_iter()
+        .map(|w| {
+            let alive = now - w.last_heartbeat <= alive_ms;
+            let mut value = serde_json::to_value(&w).unwrap_or_default();
+            value["alive"] = json!(alive);
+            value
+        })
+        .collect();
+    Ok(Json(json!({ "workers": workers })).into_response())
+}
+
+pub async fn tasks(State(state): State<Arc<AppState>>) -> Res {
+    Ok(Json(&*state.catalog).into_response())
+}

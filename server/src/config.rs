@@ -1,0 +1,87 @@
+//! The coordinator's settings, from flags or a JSON config file.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+/// Coordinator settings. Defaults: REST on 127.0.0.1:8080, gRPC on 127.0.0.1:50051, data in
+/// `./data`, no token.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServerConfig {
+    /// Address of the REST API and dashboard.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub http: String,
+    /// Address of the gRPC endpoint for workers.
+    #[arg(long, default_value = "127.0.0.1:50051")]
+    pub grpc: String,
+    /// Folder of the sqlite file and the checkpoints (created if missing).
+    #[arg(long, default_value = "data")]
+    pub data_dir: PathBuf,
+    /// Bearer token required from workers and for mutating REST calls.
+    #[arg(long, env = "CRM_TOKEN")]
+    pub token: Option<String>,
+    /// Seconds a lease lives without a heartbeat before the job is re-queued.
+    #[arg(long, default_value_t = 30)]
+    pub lease_ttl_s: u32,
+    /// Seconds between worker heartbeats (told to workers when they register).
+    #[arg(long, default_value_t = 5)]
+    pub heartbeat_interval_s: u32,
+    /// Largest REST request body, bytes.
+    #[arg(long, default_value_t = 256 * 1024)]
+    pub max_body_bytes: usize,
+    /// REST requests served at once.
+    #[arg(long, default_value_t = 256)]
+    pub max_concurrent_requests: usize,
+    /// Largest checkpoint a worker may upload, bytes.
+    #[arg(long, default_value_t = 256 * 1024 * 1024)]
+    pub max_checkpoint_bytes: u64,
+    /// Episode summaries kept per job.
+    #[arg(long, default_value_t = 200)]
+    pub episodes_kept: u32,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        Self {
+            http: "127.0.0.1:8080".into(),
+            grpc: "127.0.0.1:50051".into(),
+            data_dir: PathBuf::from("data"),
+            token: None,
+            lease_ttl_s: 30,
+            heartbeat_interval_s: 5,
+            max_body_bytes: 256 * 1024,
+            max_concurrent_requests: 256,
+            max_checkpoint_bytes: 256 * 1024 * 1024,
+            episodes_kept: 200,
+        }
+    }
+}
+
+impl ServerConfig {
+    /// Refuses settings that cannot work, naming the setting.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if self.heartbeat_interval_s == 0 || self.lease_ttl_s <= self.heartbeat_interval_s {
+            anyhow::bail!(
+                "lease_ttl_s ({}) must exceed heartbeat_interval_s ({}), which must be positive",
+                self.lease_ttl_s,
+                self.heartbeat_interval_s
+            );
+        }
+        if self.token.as_deref() == Some("") {
+            anyhow::bail!("token: must not be empty");
+        }
+        if self.max_body_bytes == 0 || self.max_concurrent_requests == 0 {
+            anyhow::bail!("max_body_bytes and max_concurrent_requests must be positive");
+        }
+        Ok(())
+    }
+}
+
+/// Reads settings from a JSON file; unknown keys are refused by name.
+pub fn load(path: &std::path::Path) -> anyhow::Result<ServerConfig> {
+    use anyhow::Context;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}

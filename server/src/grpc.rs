@@ -1,0 +1,408 @@
+//! The gRPC side (tonic): the `Coordinator` service workers call to register, lease jobs,
+//! heartbeat, stream progress, move checkpoints in chunks and finish jobs. With a token
+//! configured, every call must carry `authorization: Bearer <token>`.
+
+use std::pin::Pin;
+use std::sync::Arc;
+
+use crm_proto::pb::coordinator_server::{Coordinator, CoordinatorServer};
+use crm_proto::pb::{self, checkpoint_chunk, progress};
+use tokio::io::AsyncWriteExt;
+use tokio_stream::Stream;
+use tonic::service::interceptor::InterceptedService;
+use tonic::{Request, Response, Status, Streaming};
+
+use crate::AppState;
+use crate::store::StoreError;
+
+/// Bytes per checkpoint chunk sent to workers.
+pub const CHUNK: usize = 256 * 1024;
+
+/// Refuses calls without the configured bearer token.
+#[derive(Clone)]
+pub struct TokenCheck(Option<Arc<str>>);
+
+impl TokenCheck {
+    pub fn new(token: Option<&str>) -> Self {
+        Self(token.map(Arc::from))
+    }
+}
+
+impl tonic::service::Interceptor for TokenCheck {
+    fn call(&mut self, request: Request<()>) -> Result<Request<()>, Status> {
+        if let Some(token) = &self.0 {
+            let given = request
+                .metadata()
+                .get("authorization")
+                .and_then(|v| v.to_str().ok())
+                .and_then(|v| v.strip_prefix("Bearer "));
+            if given != Some(&**token) {
+                return Err(Status::unauthenticated("missing or wrong bearer token"));
+            }
+        }
+        Ok(request)
+    }
+}
+
+/// The coordinator service with its token check.
+pub fn service(
+    state: Arc<AppState>,
+) -> InterceptedService<CoordinatorServer<CoordinatorService>, TokenCheck> {
+    let check = TokenCheck::new(state.config.token.as_deref());
+    let max = (CHUNK * 4).max(4 << 20);
+    InterceptedService::new(
+        CoordinatorServer::new(CoordinatorService { state })
+            .max_decoding_message_size(max)
+            .max_encoding_message_size(max),
+        check,
+    )
+}
+
+pub struct CoordinatorService {
+    state: Arc<AppState>,
+}
+
+fn status(err: StoreError) -> Status {
+    match err {
+        StoreError::NotFound => Status::not_found("unknown worker, job or checkpoint"),
+        StoreError::Conflict(state) => Status::failed_precondition(format!("job is {state}")),
+        other => {
+            tracing::error!(err = %other, "store error");
+            Status::internal(other.to_string())
+        }
+    }
+}
+
+impl CoordinatorService {
+    fn ttl_ms(&self) -> i64 {
+        i64::from(self.state.config.lease_ttl_s) * 1000
+    }
+
+    async fn require_lease(&self, worker: &str, job: i64) -> Result<(), Status> {
+        if self.state.store.holds(worker, job).await.map_err(status)? {
+            Ok(())
+        } else {
+            Err(Status::failed_precondition(format!(
+                "worker {worker} does not hold job {job}"
+            )))
+        }
+    }
+}
+
+#[tonic::async_trait]
+impl Coordinator for CoordinatorService {
+    async fn register(
+        &self,
+        request: Request<pb::RegisterRequest>,
+    ) -> Result<Response<pb::RegisterReply>, Status> {
+        let r = request.into_inner();
+        if r.name.is_empty() || r.name.len() > 200 {
+            return Err(Status::invalid_argument("name: 1 to 200 characters"));
+        }
+        let worker = self
+            .state
+            .store
+            .register_worker(&r.name, i64::from(r.cores), &r.version)
+            .await
+            .map_err(status)?;
+        tracing::info!(worker = worker.id, name = worker.name, "worker registered");
+        Ok(Response::new(pb::RegisterReply {
+            worker_id: worker.id,
+            heartbeat_interval_s: self.state.config.heartbeat_interval_s,
+            lease_ttl_s: self.state.config.lease_ttl_s,
+        }))
+    }
+
+    async fn lease(
+        &self,
+        request: Request<pb::LeaseRequest>,
+    ) -> Result<Response<pb::LeaseReply>, Status> {
+        let worker = request.into_inner().worker_id;
+        let store = &self.state.store;
+        let Some(job) = store.lease(&worker, self.ttl_ms()).await.map_err(status)? else {
+            return Ok(Response::new(pb::LeaseReply { job: None }));
+        };
+        let checkpoint_id = match job.kind.as_str() {
+            "eval" => job.checkpoint_id.unwrap_or(0),
+            _ => store
+                .latest_checkpoint(job.id)
+                .await
+                .map_err(status)?
+                .map_or(0, |c| c.id),
+        };
+        tracing::info!(
+            job = job.id,
+            worker,
+            attempt = job.attempts,
+            checkpoint_id,
+            "job leased"
+        );
+        self.state.notify();
+        Ok(Response::new(pb::LeaseReply {
+            job: Some(pb::Job {
+                job_id: job.id,
+                kind: job.kind,
+                spec_json: job.spec,
+                checkpoint_id,
+                attempt: u32::try_from(job.attempts - 1).unwrap_or(0),
+            }),
+        }))
+    }
+
+    async fn heartbeat(
+        &self,
+        request: Request<pb::HeartbeatRequest>,
+    ) -> Result<Response<pb::HeartbeatReply>, Status> {
+        let r = request.into_inner();
+        let held = self
+            .state
+            .store
+            .heartbeat(&r.worker_id, r.job_id, self.ttl_ms())
+            .await
+            .map_err(status)?;
+        Ok(Response::new(pb::HeartbeatReply { stop: !held }))
+    }
+
+    async fn report_progress(
+        &self,
+        request: Request<Streaming<pb::Progress>>,
+    ) -> Result<Response<pb::ProgressReply>, Status> {
+        let mut stream = request.into_inner();
+        let store = &self.state.store;
+        let mut accepted = 0;
+        let mut leased: Option<(String, i64, u64)> = None;
+        while let Some(message) = stream.message().await? {
+            let key = (message.worker_id.clone(), message.job_id);
+            let budget = match &leased {
+                Some((w, j, budget)) if (w, *j) == (&key.0, key.1) => *budget,
+                _ => {
+                    self.require_lease(&key.0, key.1).await?;
+                    let job = store.job(key.1).await.map_err(status)?;
+                    let budget = serde_json::from_str::<serde_json::Value>(&job.spec)
+                        .ok()
+                        .and_then(|s| s["steps"].as_u64().or(s["episodes"].as_u64()))
+                        .unwrap_or(1);
+                    leased = Some((key.0.clone(), key.1, budget));
+                    budget
+                }
+            };
+            match message.body {
+                Some(progress::Body::IterationJson(json)) => {
+                    let it: crm_api::Iteration = serde_json::from_str(&json)
+                        .map_err(|e| Status::invalid_argument(format!("iteration_json: {e}")))?;
+                    let fraction = (it.steps as f64 / budget.max(1) as f64).min(1.0);
+                    store
+                        .add_metric(key.1, &it, fraction)
+                        .await
+                        .map_err(status)?;
+                }
+                Some(progress::Body::Eval(eval)) => {
+                    let fraction = eval.episodes_done as f64 / eval.episodes_total.max(1) as f64;
+                    store
+                        .set_progress(key.1, fraction.min(1.0))
+                        .await
+                        .map_err(status)?;
+                }
+                Some(progress::Body::Episode(episode)) => {
+                    let json = serde_json::json!({
+                        "task": episode.task,
+                        "success": episode.success,
+                        "length": episode.length,
+                        "return": episode.episode_return,
+                        "transitions": episode.transitions.iter().map(|t| serde_json::json!({
+                            "step": t.step, "from": t.from_stage, "to": t.to_stage,
+                            "event": t.event, "reward": t.reward,
+                        })).collect::<Vec<_>>(),
+                    });
+                    store
+                        .add_episode(
+                            key.1,
+                            &json.to_string(),
+                            i64::from(self.state.config.episodes_kept),
+                        )
+                        .await
+                        .map_err(status)?;
+                }
+                None => return Err(Status::invalid_argument("progress: empty body")),
+            }
+            accepted += 1;
+            self.state.notify();
+        }
+        Ok(Response::new(pb::ProgressReply { accepted }))
+    }
+
+    async fn upload_checkpoint(
+        &self,
+        request: Request<Streaming<pb::CheckpointChunk>>,
+    ) -> Result<Response<pb::CheckpointReply>, Status> {
+        let mut stream = request.into_inner();
+        let meta = match stream.message().await? {
+            Some(pb::CheckpointChunk {
+                body: Some(checkpoint_chunk::Body::Meta(meta)),
+            }) => meta,
+            _ => return Err(Status::invalid_argument("the first chunk must carry meta")),
+        };
+        self.require_lease(&meta.worker_id, meta.job_id).await?;
+        if crm_api::Algorithm::parse(&meta.algorithm).is_none() {
+            return Err(Status::invalid_argument(
+                "meta.algorithm: unknown algorithm",
+            ));
+        }
+        let max = self.state.config.max_checkpoint_bytes;
+        if meta.size > max {
+            return Err(Status::invalid_argument(format!(
+                "meta.size: over {max} bytes"
+            )));
+        }
+        let dir = self.state.store.checkpoint_dir();
+        let name = format!(
+            "job{}-{}-{}.safetensors",
+            meta.job_id,
+            meta.steps,
+            crate::store::now_ms()
+        );
+        let partial = dir.join(format!("{name}.partial"));
+        let mut file = tokio::fs::File::create(&partial)
+            .await
+            .map_err(|e| Status::internal(e.to_string()))?;
+        let mut written = 0u64;
+        let result: Result<(), Status> = async {
+            while let Some(chunk) = stream.message().await? {
+                let Some(checkpoint_chunk::Body::Data(data)) = chunk.body else {
+                    return Err(Status::invalid_argument("only data chunks after meta"));
+                };
+                written += data.len() as u64;
+                if written > meta.size {
+                    return Err(Status::invalid_argument("more bytes than meta.size"));
+                }
+                file.write_all(&data)
+                    .await
+                    .map_err(|e| Status::internal(e.to_string()))?;
+            }
+            if written != meta.size {
+                return Err(Status::invalid_argument(format!(
+                    "got {written} bytes, meta.size says {}",
+                    meta.size
+                )));
+            }
+            file.sync_all()
+                .await
+                .map_err(|e| Status::internal(e.to_string()))?;
+            tokio::fs::rename(&partial, dir.join(&name))
+                .await
+                .map_err(|e| Status::internal(e.to_string()))
+        }
+        .await;
+        if let Err(err) = result {
+            tokio::fs::remove_file(&partial).await.ok();
+            return Err(err);
+        }
+        let row = self
+            .state
+            .store
+            .add_checkpoint(
+                meta.job_id,
+                &meta.algorithm,
+                meta.steps as i64,
+                written as i64,
+                &name,
+            )
+            .await
+            .map_err(status)?;
+        tracing::info!(
+            job = meta.job_id,
+            checkpoint = row.id,
+            steps = meta.steps,
+            "checkpoint stored"
+        );
+        self.state.notify();
+        Ok(Response::new(pb::CheckpointReply {
+            checkpoint_id: row.id,
+        }))
+    }
+
+    type DownloadCheckpointStream =
+        Pin<Box<dyn Stream<Item = Result<pb::CheckpointChunk, Status>> + Send>>;
+
+    async fn download_checkpoint(
+        &self,
+        request: Request<pb::DownloadRequest>,
+    ) -> Result<Response<Self::DownloadCheckpointStream>, Status> {
+        let r = request.into_inner();
+        self.state
+            .store
+            .worker(&r.worker_id)
+            .await
+            .map_err(status)?;
+        let row = self
+            .state
+            .store
+            .checkpoint(r.checkpoint_id)
+            .await
+            .map_err(status)?;
+        let bytes = tokio::fs::read(self.state.store.checkpoint_path(&row))
+            .await
+            .map_err(|e| Status::internal(e.to_string()))?;
+        let meta = pb::CheckpointChunk {
+            body: Some(checkpoint_chunk::Body::Meta(pb::CheckpointMeta {
+                job_id: row.job_id,
+                worker_id: String::new(),
+                steps: row.steps as u64,
+                algorithm: row.algorithm,
+                size: bytes.len() as u64,
+            })),
+        };
+        let chunks: Vec<Result<pb::CheckpointChunk, Status>> = std::iter::once(Ok(meta))
+            .chain(bytes.chunks(CHUNK).map(|c| {
+                Ok(pb::CheckpointChunk {
+                    body: Some(checkpoint_chunk::Body::Data(c.to_vec())),
+                })
+            }))
+            .collect();
+        Ok(Response::new(Box::pin(tokio_stream::iter(chunks))))
+    }
+
+    async fn complete(
+        &self,
+        request: Request<pb::CompleteRequest>,
+    ) -> Result<Response<pb::CompleteReply>, Status> {
+        let r = request.into_inner();
+        if serde_json::from_str::<serde_json::Value>(&r.result_json).is_err() {
+            return Err(Status::invalid_argument("result_json: not JSON"));
+        }
+        self.state
+            .store
+            .finish(
+                &r.worker_id,
+                r.job_id,
+                "succeeded",
+                Some(&r.result_json),
+                None,
+            )
+            .await
+            .map_err(status)?;
+        tracing::info!(job = r.job_id, worker = r.worker_id, "job succeeded");
+        self.state.notify();
+        Ok(Response::new(pb::CompleteReply {}))
+    }
+
+    async fn fail(
+        &self,
+        request: Request<pb::FailRequest>,
+    ) -> Result<Response<pb::CompleteReply>, Status> {
+        let r = request.into_inner();
+        self.state
+            .store
+            .finish(&r.worker_id, r.job_id, "failed", None, Some(&r.message))
+            .await
+            .map_err(status)?;
+        tracing::warn!(
+            job = r.job_id,
+            worker = r.worker_id,
+            message = r.message,
+            "job failed"
+        );
+        self.state.notify();
+        Ok(Response::new(pb::CompleteReply {}))
+    }
+}

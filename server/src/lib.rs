@@ -1,0 +1,145 @@
+//! The crm-grasp coordinator: an axum REST API (and, later, the dashboard) and a tonic gRPC
+//! endpoint for rollout workers over one sqlite store. Jobs are leased with a heartbeat; an
+//! expired lease puts the job back in the queue and the next worker resumes it from its
+//! last uploaded checkpoint. Links neither rapier nor candle.
+
+pub mod api;
+pub mod config;
+pub mod grpc;
+pub mod store;
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use anyhow::Context;
+use crm_api::Catalog;
+use tokio::sync::Notify;
+
+pub use config::ServerConfig;
+pub use store::Store;
+
+/// What every handler shares.
+pub struct AppState {
+    pub store: Store,
+    pub catalog: Arc<Catalog>,
+    pub config: ServerConfig,
+    /// Woken when a job is queued or changes state.
+    pub changed: Notify,
+}
+
+impl AppState {
+    pub fn notify(&self) {
+        self.changed.notify_waiters();
+    }
+}
+
+/// A running coordinator.
+pub struct Running {
+    pub http_addr: SocketAddr,
+    pub grpc_addr: SocketAddr,
+    pub state: Arc<AppState>,
+    tasks: Vec<tokio::task::JoinHandle<anyhow::Result<()>>>,
+    shutdown: Arc<Notify>,
+}
+
+impl Running {
+    /// Stops serving and closes the store.
+    pub async fn stop(self) -> anyhow::Result<()> {
+        self.shutdown.notify_waiters();
+        for task in self.tasks {
+            task.await??;
+        }
+        self.state.store.close().await;
+        Ok(())
+    }
+
+    /// Serves until ctrl-c.
+    pub async fn wait(self) -> anyhow::Result<()> {
+        tokio::signal::ctrl_c().await?;
+        tracing::info!("shutting down");
+        self.stop().await
+    }
+}
+
+/// Opens the store, binds both listeners and starts serving.
+pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
+    config.validate()?;
+    let store = Store::open(&config.data_dir)
+        .await
+        .with_context(|| format!("opening the store in {}", config.data_dir.display()))?;
+    let catalog = Arc::new(Catalog::builtin()?);
+    let state = Arc::new(AppState {
+        store,
+        catalog,
+        config: config.clone(),
+        changed: Notify::new(),
+    });
+    let http = tokio::net::TcpListener::bind(&config.http)
+        .await
+        .with_context(|| format!("binding the HTTP address {}", config.http))?;
+    let grpc = tokio::net::TcpListener::bind(&config.grpc)
+        .await
+        .with_context(|| format!("binding the gRPC address {}", config.grpc))?;
+    let http_addr = http.local_addr()?;
+    let grpc_addr = grpc.local_addr()?;
+    let shutdown = Arc::new(Notify::new());
+
+    let router = api::router(state.clone());
+    let stop = shutdown.clone();
+    let http_task = tokio::spawn(async move {
+        axum::serve(http, router)
+            .with_graceful_shutdown(async move { stop.notified().await })
+            .await
+            .context("HTTP server")
+    });
+    let stop = shutdown.clone();
+    let service = grpc::service(state.clone());
+    let grpc_task = tokio::spawn(async move {
+        tonic::transport::Server::builder()
+            .add_service(service)
+            .serve_with_incoming_shutdown(
+                tokio_stream::wrappers::TcpListenerStream::new(grpc),
+                async move { stop.notified().await },
+            )
+            .await
+            .context("gRPC server")
+    });
+    // Expired leases go back to the queue even when no worker asks for work.
+    let stop = shutdown.clone();
+    let sweeper_state = state.clone();
+    let sweeper = tokio::spawn(async move {
+        loop {
+            tokio::select! {
+                () = stop.notified() => return Ok(()),
+                () = tokio::time::sleep(std::time::Duration::from_secs(1)) => {}
+            }
+            match sweeper_state.store.requeue_expired().await {
+                Ok(0) => {}
+                Ok(n) => {
+                    tracing::warn!(jobs = n, "leases expired; jobs re-queued");
+                    sweeper_state.notify();
+                }
+                Err(err) => tracing::error!(%err, "requeue sweep failed"),
+            }
+        }
+    });
+    tracing::info!(%http_addr, %grpc_addr, data = %config.data_dir.display(), "coordinator up");
+    Ok(Running {
+        http_addr,
+        grpc_addr,
+        state,
+        tasks: vec![http_task, grpc_task, sweeper],
+        shutdown,
+    })
+}
+
+/// Structured logs to stderr; `RUST_LOG` filters (default `info`).
+pub fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init()
+        .ok();
+}

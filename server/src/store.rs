@@ -1,0 +1,443 @@
+//! The sqlite store (sqlx, WAL): workers, jobs and their leases, metric series, episode
+//! summaries and checkpoints. Migrations in `migrations/` are applied when it opens. Every
+//! state change is one statement or one transaction, so a refused request changes nothing.
+
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::Duration;
+
+use serde::Serialize;
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
+use sqlx::{FromRow, SqlitePool};
+
+/// Milliseconds since the Unix epoch.
+pub fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+/// A job as stored.
+#[derive(Clone, Debug, Serialize, FromRow)]
+pub struct Job {
+    pub id: i64,
+    pub kind: String,
+    pub state: String,
+    pub algorithm: String,
+    pub task: Option<String>,
+    #[serde(serialize_with = "as_json")]
+    pub spec: String,
+    pub checkpoint_id: Option<i64>,
+    pub rerun_of: Option<i64>,
+    pub worker_id: Option<String>,
+    pub attempts: i64,
+    pub lease_expires_at: Option<i64>,
+    pub progress: f64,
+    pub steps: i64,
+    pub steps_per_s: Option<f64>,
+    #[serde(serialize_with = "as_json_opt")]
+    pub result: Option<String>,
+    pub error: Option<String>,
+    pub created_at: i64,
+    pub started_at: Option<i64>,
+    pub finished_at: Option<i64>,
+}
+
+/// Stored JSON text goes out as JSON, not as a string.
+fn as_json<S: serde::Serializer>(text: &str, s: S) -> Result<S::Ok, S::Error> {
+    let value: serde_json::Value =
+        serde_json::from_str(text).unwrap_or_else(|_| serde_json::Value::from(text));
+    value.serialize(s)
+}
+
+fn as_json_opt<S: serde::Serializer>(text: &Option<String>, s: S) -> Result<S::Ok, S::Error> {
+    match text {
+        Some(text) => as_json(text, s),
+        None => s.serialize_none(),
+    }
+}
+
+#[derive(Clone, Debug, Serialize, FromRow)]
+pub struct Worker {
+    pub id: String,
+    pub name: String,
+    pub cores: i64,
+    pub version: String,
+    pub registered_at: i64,
+    pub last_heartbeat: i64,
+}
+
+#[derive(Clone, Debug, Serialize, FromRow)]
+pub struct CheckpointRow {
+    pub id: i64,
+    pub job_id: i64,
+    pub algorithm: String,
+    pub steps: i64,
+    pub size: i64,
+    #[serde(skip)]
+    pub file: String,
+    pub created_at: i64,
+}
+
+#[derive(Clone, Debug, Serialize, FromRow)]
+pub struct Metric {
+    pub steps: i64,
+    pub iteration: i64,
+    pub wall_s: f64,
+    #[serde(serialize_with = "as_json")]
+    pub data: String,
+}
+
+/// Filters for listing jobs.
+#[derive(Clone, Debug, Default)]
+pub struct JobFilter {
+    pub kind: Option<String>,
+    pub state: Option<String>,
+    pub algorithm: Option<String>,
+    pub limit: i64,
+}
+
+/// A new job.
+pub struct NewJob<'a> {
+    pub kind: &'a str,
+    pub algorithm: &'a str,
+    pub task: Option<&'a str>,
+    pub spec: &'a str,
+    pub checkpoint_id: Option<i64>,
+    pub rerun_of: Option<i64>,
+}
+
+/// Why a state change was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("not found")]
+    NotFound,
+    #[error("job is {0}")]
+    Conflict(String),
+    #[error(transparent)]
+    Sql(#[from] sqlx::Error),
+    #[error(transparent)]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}
+
+pub type Result<T, E = StoreError> = std::result::Result<T, E>;
+
+/// The store: a connection pool and the checkpoint folder.
+#[derive(Clone)]
+pub struct Store {
+    pool: SqlitePool,
+    checkpoints: PathBuf,
+}
+
+const JOB_COLUMNS: &str = "id, kind, state, algorithm, task, spec, checkpoint_id, rerun_of, worker_id, attempts, lease_expires_at, progress, steps, steps_per_s, result, error, created_at, started_at, finished_at";
+
+impl Store {
+    /// Opens (creating) `<data_dir>/crm-grasp.sqlite` and applies the migrations.
+    pub async fn open(data_dir: &Path) -> Result<Self> {
+        std::fs::create_dir_all(data_dir.join("checkpoints"))?;
+        let path = data_dir.join("crm-grasp.sqlite");
+        let options = SqliteConnectOptions::from_str("sqlite:")?
+            .filename(&path)
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            .foreign_keys(true)
+            .busy_timeout(Duration::from_secs(10));
+        let pool = SqlitePoolOptions::new()
+            .max_connections(8)
+            .connect_with(options)
+            .await?;
+        sqlx::migrate!("../migrations").run(&pool).await?;
+        Ok(Self {
+            pool,
+            checkpoints: data_dir.join("checkpoints"),
+        })
+    }
+
+    pub fn checkpoint_dir(&self) -> &Path {
+        &self.checkpoints
+    }
+
+    pub async fn close(&self) {
+        self.pool.close().await;
+    }
+
+    // ---- workers ----
+
+    pub async fn register_worker(&self, name: &str, cores: i64, version: &str) -> Result<Worker> {
+        let now = now_ms();
+        let count: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM workers")
+            .fetch_one(&self.pool)
+            .await?;
+        let id = format!("w{}-{:x}", count + 1, now & 0xFFFF_FFFF);
+        sqlx::query("INSERT INTO workers (id, name, cores, version, registered_at, last_heartbeat) VALUES (?, ?, ?, ?, ?, ?)")
+            .bind(&id).bind(name).bind(cores).bind(version).bind(now).bind(now)
+            .execute(&self.pool)
+            .await?;
+        self.worker(&id).await
+    }
+
+    pub async fn worker(&self, id: &str) -> Result<Worker> {
+        sqlx::query_as("SELECT * FROM workers WHERE id = ?")
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?
+            .ok_or(StoreError::NotFound)
+    }
+
+    pub async fn workers(&self) -> Result<Vec<Worker>> {
+        Ok(
+            sqlx::query_as("SELECT * FROM workers ORDER BY registered_at")
+                .fetch_all(&self.pool)
+                .await?,
+        )
+    }
+
+    async fn touch_worker(&self, id: &str) -> Result<()> {
+        let done = sqlx::query("UPDATE workers SET last_heartbeat = ? WHERE id = ?")
+            .bind(now_ms())
+            .bind(id)
+            .execute(&self.pool)
+            .await?;
+        if done.rows_affected() == 0 {
+            return Err(StoreError::NotFound);
+        }
+        Ok(())
+    }
+
+    // ---- jobs ----
+
+    pub async fn create_job(&self, job: NewJob<'_>) -> Result<Job> {
+        let id: i64 = sqlx::query_scalar("INSERT INTO jobs (kind, state, algorithm, task, spec, checkpoint_id, rerun_of, created_at) VALUES (?, 'queued', ?, ?, ?, ?, ?, ?) RETURNING id")
+            .bind(job.kind).bind(job.algorithm).bind(job.task).bind(job.spec)
+            .bind(job.checkpoint_id).bind(job.rerun_of).bind(now_ms())
+            .fetch_one(&self.pool)
+            .await?;
+        self.job(id).await
+    }
+
+    pub async fn job(&self, id: i64) -> Result<Job> {
+        sqlx::query_as(&format!("SELECT {JOB_COLUMNS} FROM jobs WHERE id = ?"))
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?
+            .ok_or(StoreError::NotFound)
+    }
+
+    pub async fn jobs(&self, filter: &JobFilter) -> Result<Vec<Job>> {
+        Ok(sqlx::query_as(&format!(
+            "SELECT {JOB_COLUMNS} FROM jobs WHERE (?1 IS NULL OR kind = ?1) AND (?2 IS NULL OR state = ?2) AND (?3 IS NULL OR algorithm = ?3) ORDER BY id DESC LIMIT ?4"
+        ))
+        .bind(&filter.kind)
+        .bind(&filter.state)
+        .bind(&filter.algorithm)
+        .bind(if filter.limit > 0 { filter.limit } else { 1000 })
+        .fetch_all(&self.pool)
+        .await?)
+    }
+
+    /// Cancels a queued or running job; a finished one is a conflict.
+    pub async fn cancel_job(&self, id: i64) -> Result<Job> {
+        let done = sqlx::query("UPDATE jobs SET state = 'cancelled', finished_at = ?, lease_expires_at = NULL WHERE id = ? AND state IN ('queued', 'running')")
+            .bind(now_ms())
+            .bind(id)
+            .execute(&self.pool)
+            .await?;
+        let job = self.job(id).await?;
+        if done.rows_affected() == 0 {
+            return Err(StoreError::Conflict(job.state));
+        }
+        Ok(job)
+    }
+
+    /// Puts running jobs whose lease expired back in the queue; returns how many.
+    pub async fn requeue_expired(&self) -> Result<u64> {
+        let done = sqlx::query("UPDATE jobs SET state = 'queued', worker_id = NULL, lease_expires_at = NULL WHERE state = 'running' AND lease_expires_at < ?")
+            .bind(now_ms())
+            .execute(&self.pool)
+            .await?;
+        Ok(done.rows_affected())
+    }
+
+    /// Leases the oldest queued job to `worker` for `ttl_ms`.
+    pub async fn lease(&self, worker: &str, ttl_ms: i64) -> Result<Option<Job>> {
+        self.touch_worker(worker).await?;
+        self.requeue_expired().await?;
+        let now = now_ms();
+        let id: Option<i64> = sqlx::query_scalar(
+            "UPDATE jobs SET state = 'running', worker_id = ?1, attempts = attempts + 1, lease_expires_at = ?2, started_at = COALESCE(started_at, ?3) WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY id LIMIT 1) RETURNING id",
+        )
+        .bind(worker)
+        .bind(now + ttl_ms)
+        .bind(now)
+        .fetch_optional(&self.pool)
+        .await?;
+        match id {
+            Some(id) => Ok(Some(self.job(id).await?)),
+            None => Ok(None),
+        }
+    }
+
+    /// Extends a lease; `false` when the job is no longer this worker's (cancelled,
+    /// re-leased, finished).
+    pub async fn heartbeat(&self, worker: &str, job: i64, ttl_ms: i64) -> Result<bool> {
+        self.touch_worker(worker).await?;
+        if job == 0 {
+            return Ok(true);
+        }
+        let done = sqlx::query("UPDATE jobs SET lease_expires_at = ? WHERE id = ? AND worker_id = ? AND state = 'running'")
+            .bind(now_ms() + ttl_ms)
+            .bind(job)
+            .bind(worker)
+            .execute(&self.pool)
+            .await?;
+        Ok(done.rows_affected() == 1)
+    }
+
+    /// Whether `worker` holds the lease on `job`.
+    pub async fn holds(&self, worker: &str, job: i64) -> Result<bool> {
+        let held: Option<i64> = sqlx::query_scalar(
+            "SELECT id FROM jobs WHERE id = ? AND worker_id = ? AND state = 'running'",
+        )
+        .bind(job)
+        .bind(worker)
+        .fetch_optional(&self.pool)
+        .await?;
+        Ok(held.is_some())
+    }
+
+    /// Records a training iteration (replacing one at the same step after a resume).
+    pub async fn add_metric(&self, job: i64, it: &crm_api::Iteration, progress: f64) -> Result<()> {
+        let data = serde_json::to_string(it).unwrap_or_default();
+        let mut tx = self.pool.begin().await?;
+        sqlx::query("INSERT OR REPLACE INTO metrics (job_id, steps, iteration, wall_s, data) VALUES (?, ?, ?, ?, ?)")
+            .bind(job).bind(it.steps as i64).bind(it.iteration as i64).bind(it.wall_s).bind(data)
+            .execute(&mut *tx)
+            .await?;
+        sqlx::query("UPDATE jobs SET progress = ?, steps = ?, steps_per_s = ? WHERE id = ?")
+            .bind(progress)
+            .bind(it.steps as i64)
+            .bind(it.steps_per_s)
+            .bind(job)
+            .execute(&mut *tx)
+            .await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    pub async fn set_progress(&self, job: i64, progress: f64) -> Result<()> {
+        sqlx::query("UPDATE jobs SET progress = ? WHERE id = ?")
+            .bind(progress)
+            .bind(job)
+            .execute(&self.pool)
+            .await?;
+        Ok(())
+    }
+
+    pub async fn metrics(&self, job: i64) -> Result<Vec<Metric>> {
+        Ok(sqlx::query_as(
+            "SELECT steps, iteration, wall_s, data FROM metrics WHERE job_id = ? ORDER BY steps",
+        )
+        .bind(job)
+        .fetch_all(&self.pool)
+        .await?)
+    }
+
+    /// Keeps the latest `keep` episode summaries of a job.
+    pub async fn add_episode(&self, job: i64, data: &str, keep: i64) -> Result<()> {
+        sqlx::query("INSERT INTO episodes (job_id, data, created_at) VALUES (?, ?, ?)")
+            .bind(job)
+            .bind(data)
+            .bind(now_ms())
+            .execute(&self.pool)
+            .await?;
+        sqlx::query("DELETE FROM episodes WHERE job_id = ?1 AND id <= (SELECT id FROM episodes WHERE job_id = ?1 ORDER BY id DESC LIMIT 1 OFFSET ?2)")
+            .bind(job)
+            .bind(keep)
+            .execute(&self.pool)
+            .await?;
+        Ok(())
+    }
+
+    pub async fn episodes(&self, job: i64) -> Result<Vec<serde_json::Value>> {
+        let rows: Vec<String> =
+            sqlx::query_scalar("SELECT data FROM episodes WHERE job_id = ? ORDER BY id")
+                .bind(job)
+                .fetch_all(&self.pool)
+                .await?;
+        Ok(rows
+            .iter()
+            .filter_map(|r| serde_json::from_str(r).ok())
+            .collect())
+    }
+
+    /// Ends a job the worker holds: `state` is `succeeded` or `failed`.
+    pub async fn finish(
+        &self,
+        worker: &str,
+        job: i64,
+        state: &str,
+        result: Option<&str>,
+        error: Option<&str>,
+    ) -> Result<()> {
+        let done = sqlx::query("UPDATE jobs SET state = ?, result = ?, error = ?, finished_at = ?, lease_expires_at = NULL, progress = CASE WHEN ? = 'succeeded' THEN 1.0 ELSE progress END WHERE id = ? AND worker_id = ? AND state = 'running'")
+            .bind(state).bind(result).bind(error).bind(now_ms()).bind(state).bind(job).bind(worker)
+            .execute(&self.pool)
+            .await?;
+        if done.rows_affected() == 0 {
+            let job = self.job(job).await?;
+            return Err(StoreError::Conflict(job.state));
+        }
+        Ok(())
+    }
+
+    // ---- checkpoints ----
+
+    /// Records a checkpoint whose bytes are already at `file` in the checkpoint folder.
+    pub async fn add_checkpoint(
+        &self,
+        job: i64,
+        algorithm: &str,
+        steps: i64,
+        size: i64,
+        file: &str,
+    ) -> Result<CheckpointRow> {
+        let id: i64 = sqlx::query_scalar("INSERT INTO checkpoints (job_id, algorithm, steps, size, file, created_at) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
+            .bind(job).bind(algorithm).bind(steps).bind(size).bind(file).bind(now_ms())
+            .fetch_one(&self.pool)
+            .await?;
+        self.checkpoint(id).await
+    }
+
+    pub async fn checkpoint(&self, id: i64) -> Result<CheckpointRow> {
+        sqlx::query_as("SELECT * FROM checkpoints WHERE id = ?")
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?
+            .ok_or(StoreError::NotFound)
+    }
+
+    pub async fn checkpoints(&self, job: Option<i64>) -> Result<Vec<CheckpointRow>> {
+        Ok(sqlx::query_as(
+            "SELECT * FROM checkpoints WHERE (?1 IS NULL OR job_id = ?1) ORDER BY id DESC",
+        )
+        .bind(job)
+        .fetch_all(&self.pool)
+        .await?)
+    }
+
+    /// The newest checkpoint of a job, to resume from.
+    pub async fn latest_checkpoint(&self, job: i64) -> Result<Option<CheckpointRow>> {
+        Ok(
+            sqlx::query_as("SELECT * FROM checkpoints WHERE job_id = ? ORDER BY id DESC LIMIT 1")
+                .bind(job)
+                .fetch_optional(&self.pool)
+                .await?,
+        )
+    }
+
+    pub fn checkpoint_path(&self, row: &CheckpointRow) -> PathBuf {
+        self.checkpoints.join(&row.file)
+    }
+}

@@ -1,0 +1,258 @@
+//! End-to-end tests of the training service: the real `crm-server` and `crm worker`
+//! binaries on loopback ports with a temporary data folder, driven through REST and gRPC.
+
+mod support;
+
+use serde_json::Value;
+use support::*;
+
+const TRAIN: &str = r#"{"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 4096, "seed": 3, "envs": 2, "config": {"rollout_steps": 1024, "learning_rate": 0.0003}}"#;
+
+fn submit(addr: &str, body: &str) -> Value {
+    let reply = http(addr, "POST", "/api/v1/jobs", Some(body), None);
+    assert_eq!(
+        reply.status,
+        201,
+        "{}",
+        String::from_utf8_lossy(&reply.body)
+    );
+    reply.json()
+}
+
+fn error_field(reply: &Reply) -> String {
+    reply.json()["error"]["field"]
+        .as_str()
+        .unwrap_or("")
+        .to_string()
+}
+
+#[test]
+fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
+    let data = TempDir::new("train");
+    let server = start_server(&data.0, &[]);
+    let addr = server.http.clone();
+    let _worker = start_worker(
+        &format!("http://{}", server.grpc),
+        &["--checkpoint-every-s", "2"],
+    );
+
+    let job = submit(&addr, TRAIN);
+    let id = job["id"].as_i64().expect("id");
+    assert_eq!(job["state"], "queued");
+    let done = wait_state(&addr, id, "succeeded", 240);
+    assert_eq!(done["progress"], 1.0);
+    assert!(done["worker_id"].as_str().is_some());
+
+    // Metrics and a checkpoint are stored.
+    let run = get(&addr, &format!("/api/v1/runs/{id}"));
+    let metrics = run["metrics"].as_array().expect("metrics");
+    assert_eq!(metrics.len(), 4, "one entry per iteration of 1024 steps");
+    assert_eq!(metrics[3]["steps"], 4096);
+    assert!(metrics[0]["data"]["stage_mix"].is_object());
+    let checkpoint = done["result"]["checkpoint_id"]
+        .as_i64()
+        .expect("checkpoint id");
+    let meta = get(&addr, &format!("/api/v1/checkpoints/{checkpoint}"));
+    assert_eq!(meta["steps"], 4096);
+    let file = http(
+        &addr,
+        "GET",
+        &format!("/api/v1/checkpoints/{checkpoint}/download"),
+        None,
+        None,
+    );
+    assert_eq!(file.status, 200);
+    assert_eq!(file.body.len() as i64, meta["size"].as_i64().expect("size"));
+    // A safetensors file: 8-byte header length, then a JSON header with our metadata.
+    let header_len = u64::from_le_bytes(file.body[..8].try_into().expect("8 bytes")) as usize;
+    let header = String::from_utf8_lossy(&file.body[8..8 + header_len]);
+    assert!(header.contains("crm-grasp-checkpoint/1"), "{header}");
+
+    // Evaluate that checkpoint remotely.
+    let eval = submit(
+        &addr,
+        &format!(
+            r#"{{"kind": "eval", "checkpoint_id": {checkpoint}, "episodes": 3, "task": "mouse-press", "seed": 1}}"#
+        ),
+    );
+    let eval_id = eval["id"].as_i64().expect("id");
+    let evaluated = wait_state(&addr, eval_id, "succeeded", 240);
+    let result = &evaluated["result"];
+    assert_eq!(result["episodes"], 3);
+    assert_eq!(result["per_objective"]["press"]["episodes"], 3);
+    assert!(result["success_rate"].as_f64().is_some());
+    let listed = get(&addr, "/api/v1/evaluations");
+    assert_eq!(listed["evaluations"][0]["id"], eval_id);
+    let run = get(&addr, &format!("/api/v1/runs/{id}"));
+    assert_eq!(run["evaluations"][0]["id"], eval_id);
+    assert_eq!(
+        run["episodes"].as_array().map(Vec::len),
+        Some(0),
+        "training sends no episode summaries"
+    );
+    let workers = get(&addr, "/api/v1/workers");
+    assert_eq!(workers["workers"][0]["alive"], true);
+
+    // Refused requests change nothing.
+    let before = get(&addr, "/api/v1/jobs");
+    let cases = [
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": -1}"#,
+            "steps",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "dqn", "steps": 10}"#,
+            "algorithm",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-sac", "steps": 10}"#,
+            "algorithm",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "task": "nope"}"#,
+            "task",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "config": {"gamma": 3}}"#,
+            "config.gamma",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "config": {"gama": 0.9}}"#,
+            "config.gama",
+        ),
+        (r#"{"kind": "eval", "checkpoint_id": 999}"#, "checkpoint_id"),
+        (r#"{"kind": "fly"}"#, "kind"),
+        ("not json", "body"),
+    ];
+    for (body, field) in cases {
+        let reply = http(&addr, "POST", "/api/v1/jobs", Some(body), None);
+        assert_eq!(reply.status, 400, "{body}");
+        assert_eq!(error_field(&reply), field, "{body}: {}", reply.json());
+    }
+    assert_eq!(
+        http(&addr, "GET", "/api/v1/jobs/12345", None, None).status,
+        404
+    );
+    assert_eq!(
+        http(&addr, "GET", "/api/v1/jobs/abc", None, None).status,
+        400
+    );
+    let conflict = http(
+        &addr,
+        "POST",
+        &format!("/api/v1/jobs/{id}/cancel"),
+        None,
+        None,
+    );
+    assert_eq!(conflict.status, 409);
+    assert_eq!(conflict.json()["error"]["code"], "conflict");
+    let huge = format!(r#"{{"kind": "train", "pad": "{}"}}"#, "x".repeat(400_000));
+    assert_eq!(
+        http(&addr, "POST", "/api/v1/jobs", Some(&huge), None).status,
+        413
+    );
+    assert_eq!(get(&addr, "/api/v1/jobs"), before);
+
+    // Restart the coordinator on the same data: everything is still there.
+    let metrics_before = get(&addr, &format!("/api/v1/runs/{id}/metrics"));
+    drop(server);
+    let server = start_server(&data.0, &[]);
+    let addr = server.http.clone();
+    assert_eq!(get(&addr, "/api/v1/jobs"), before);
+    assert_eq!(
+        get(&addr, &format!("/api/v1/runs/{id}/metrics")),
+        metrics_before
+    );
+    let file_again = http(
+        &addr,
+        "GET",
+        &format!("/api/v1/checkpoints/{checkpoint}/download"),
+        None,
+        None,
+    );
+    assert_eq!(file_again.body, file.body);
+    let openapi = get(&addr, "/api/v1/openapi.json");
+    assert!(openapi["paths"]["/api/v1/jobs"]["post"].is_object());
+}
+
+#[test]
+fn a_killed_workers_job_is_requeued_and_resumed_from_its_checkpoint() {
+    let data = TempDir::new("requeue");
+    let server = start_server(
+        &data.0,
+        &["--lease-ttl-s", "3", "--heartbeat-interval-s", "1"],
+    );
+    let addr = server.http.clone();
+    let grpc = format!("http://{}", server.grpc);
+    let mut first = start_worker(&grpc, &["--checkpoint-every-s", "1", "--name", "first"]);
+    let body = TRAIN.replace("4096", "40960");
+    let id = submit(&addr, &body)["id"].as_i64().expect("id");
+    // Kill the first worker once it has uploaded a checkpoint.
+    let saved = wait_for(240, "a first checkpoint", || {
+        let list = get(&addr, &format!("/api/v1/checkpoints?job_id={id}"));
+        list["checkpoints"][0]["steps"].as_i64()
+    });
+    first.0.kill().expect("kill");
+    first.0.wait().ok();
+    // The lease runs out and the job goes back to the queue.
+    wait_state(&addr, id, "queued", 30);
+    let _second = start_worker(&grpc, &["--checkpoint-every-s", "30", "--name", "second"]);
+    let done = wait_state(&addr, id, "succeeded", 300);
+    assert_eq!(done["attempts"], 2);
+    let resumed = done["result"]["resumed_from_steps"]
+        .as_i64()
+        .expect("resumed");
+    assert!(
+        resumed >= saved,
+        "resumed from {resumed}, a checkpoint at {saved} existed"
+    );
+    assert_eq!(done["result"]["steps"], 40960);
+    let workers = get(&addr, "/api/v1/workers");
+    let names: Vec<&str> = workers["workers"]
+        .as_array()
+        .expect("workers")
+        .iter()
+        .filter_map(|w| w["name"].as_str())
+        .collect();
+    assert_eq!(names, ["first", "second"]);
+}
+
+#[test]
+fn tokens_guard_workers_and_mutating_calls() {
+    let data = TempDir::new("token");
+    let server = start_server(&data.0, &["--token", "s3cret"]);
+    let addr = server.http.clone();
+    let reply = http(&addr, "POST", "/api/v1/jobs", Some(TRAIN), None);
+    assert_eq!(reply.status, 401);
+    assert_eq!(error_field(&reply), "authorization");
+    let reply = http(&addr, "POST", "/api/v1/jobs", Some(TRAIN), Some("wrong"));
+    assert_eq!(reply.status, 401);
+    assert_eq!(
+        get(&addr, "/api/v1/jobs")["jobs"].as_array().map(Vec::len),
+        Some(0)
+    );
+    let reply = http(&addr, "POST", "/api/v1/jobs", Some(TRAIN), Some("s3cret"));
+    assert_eq!(reply.status, 201);
+    // A worker with the wrong token is refused and exits with a message.
+    let out = std::process::Command::new(crm())
+        .args([
+            "worker",
+            "--coordinator",
+            &format!("http://{}", server.grpc),
+            "--token",
+            "wrong",
+        ])
+        .output()
+        .expect("run worker");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("refused"), "{stderr}");
+    assert_eq!(
+        get(&addr, "/api/v1/workers")["workers"]
+            .as_array()
+            .map(Vec::len),
+        Some(0)
+    );
+    let job = get(&addr, "/api/v1/jobs")["jobs"][0].clone();
+    assert_eq!(job["state"], "queued");
+}

@@ -1,0 +1,240 @@
+//! Helpers for the end-to-end tests: start the real binaries on free loopback ports with a
+//! temporary data folder, a small HTTP client over `std::net`, and polling.
+
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// The `crm` binary of this package.
+pub fn crm() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_crm"))
+}
+
+/// The coordinator's binary, built beside `crm` by `cargo test --workspace`.
+pub fn crm_server() -> PathBuf {
+    let path = crm().with_file_name(format!("crm-server{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        path.exists(),
+        "{} is missing: run the tests with `cargo test --release --workspace`",
+        path.display()
+    );
+    path
+}
+
+/// A temporary folder removed on drop.
+pub struct TempDir(pub PathBuf);
+
+impl TempDir {
+    pub fn new(name: &str) -> Self {
+        let path = std::env::temp_dir().join(format!(
+            "crm-e2e-{name}-{}-{}",
+            std::process::id(),
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos())
+        ));
+        std::fs::create_dir_all(&path).expect("temp dir");
+        Self(path)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.0).ok();
+    }
+}
+
+/// A child process killed on drop.
+pub struct Proc(pub Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        self.0.kill().ok();
+        self.0.wait().ok();
+    }
+}
+
+/// A running coordinator.
+pub struct Server {
+    pub proc: Proc,
+    pub http: String,
+    pub grpc: String,
+}
+
+/// Starts `crm-server` on free ports with `data` and extra flags; waits for its address line.
+pub fn start_server(data: &Path, extra: &[&str]) -> Server {
+    let mut child = Command::new(crm_server())
+        .args([
+            "--http",
+            "127.0.0.1:0",
+            "--grpc",
+            "127.0.0.1:0",
+            "--data-dir",
+        ])
+        .arg(data)
+        .args(extra)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("start crm-server");
+    let stdout = child.stdout.take().expect("stdout");
+    let mut line = String::new();
+    BufReader::new(stdout)
+        .read_line(&mut line)
+        .expect("address line");
+    // "crm-server: REST http://ADDR/api/v1  gRPC http://ADDR"
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let http = words
+        .iter()
+        .find(|w| w.ends_with("/api/v1"))
+        .and_then(|w| w.strip_prefix("http://"))
+        .and_then(|w| w.strip_suffix("/api/v1"))
+        .unwrap_or_else(|| panic!("no REST address in {line:?}"))
+        .to_string();
+    let grpc = words
+        .last()
+        .and_then(|w| w.strip_prefix("http://"))
+        .unwrap_or_else(|| panic!("no gRPC address in {line:?}"))
+        .to_string();
+    Server {
+        proc: Proc(child),
+        http,
+        grpc,
+    }
+}
+
+/// Starts `crm worker` against `grpc` with extra flags.
+pub fn start_worker(grpc: &str, extra: &[&str]) -> Proc {
+    Proc(
+        Command::new(crm())
+            .args(["worker", "--coordinator", grpc, "--poll-s", "0.2"])
+            .args(extra)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("start crm worker"),
+    )
+}
+
+/// A response: status and body.
+pub struct Reply {
+    pub status: u16,
+    pub body: Vec<u8>,
+}
+
+impl Reply {
+    pub fn json(&self) -> Value {
+        serde_json::from_slice(&self.body).unwrap_or_else(|e| {
+            panic!(
+                "status {} body is not JSON ({e}): {}",
+                self.status,
+                String::from_utf8_lossy(&self.body)
+            )
+        })
+    }
+}
+
+/// One HTTP/1.1 request with `Connection: close`.
+pub fn http(
+    addr: &str,
+    method: &str,
+    path: &str,
+    body: Option<&str>,
+    token: Option<&str>,
+) -> Reply {
+    let mut stream = TcpStream::connect(addr).expect("connect");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(30)))
+        .expect("timeout");
+    let body = body.unwrap_or("");
+    let auth = token.map_or(String::new(), |t| format!("Authorization: Bearer {t}\r\n"));
+    write!(
+        stream,
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Type: application/json\r\n{auth}Content-Length: {}\r\n\r\n{body}",
+        body.len()
+    )
+    .expect("write");
+    let mut raw = Vec::new();
+    stream.read_to_end(&mut raw).expect("read");
+    let split = raw
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("header end");
+    let head = String::from_utf8_lossy(&raw[..split]).to_string();
+    let status = head
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .expect("status");
+    let mut body = raw[split + 4..].to_vec();
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        body = dechunk(&body);
+    }
+    Reply { status, body }
+}
+
+fn dechunk(mut data: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    loop {
+        let Some(end) = data.windows(2).position(|w| w == b"\r\n") else {
+            return out;
+        };
+        let size =
+            usize::from_str_radix(String::from_utf8_lossy(&data[..end]).trim(), 16).unwrap_or(0);
+        if size == 0 {
+            return out;
+        }
+        out.extend_from_slice(&data[end + 2..end + 2 + size]);
+        data = &data[end + 2 + size + 2..];
+    }
+}
+
+pub fn get(addr: &str, path: &str) -> Value {
+    let reply = http(addr, "GET", path, None, None);
+    assert_eq!(
+        reply.status,
+        200,
+        "GET {path}: {}",
+        String::from_utf8_lossy(&reply.body)
+    );
+    reply.json()
+}
+
+/// Polls `f` until it returns `Some`, or panics after `secs` with `what`.
+pub fn wait_for<T>(secs: u64, what: &str, mut f: impl FnMut() -> Option<T>) -> T {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        if let Some(value) = f() {
+            return value;
+        }
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Waits until job `id` reaches `state`; fails early on another final state.
+pub fn wait_state(addr: &str, id: i64, state: &str, secs: u64) -> Value {
+    wait_for(secs, &format!("job {id} to be {state}"), || {
+        let job = get(addr, &format!("/api/v1/jobs/{id}"));
+        let now = job["state"].as_str().unwrap_or("").to_string();
+        if now == state {
+            return Some(job);
+        }
+        assert!(
+            !["succeeded", "failed", "cancelled"].contains(&now.as_str()),
+            "job {id} ended {now}, expected {state}: {job}"
+        );
+        None
+    })
+}

@@ -1,0 +1,104 @@
+//! `crm up`, `crm worker` and `crm serve-policy`: the service from the command line.
+
+use std::path::PathBuf;
+
+use crm_server::ServerConfig;
+
+use crate::service::{WorkerOptions, policy, up, worker_main};
+
+/// Options every worker takes.
+#[derive(clap::Args, Debug, Clone)]
+pub struct WorkerFlags {
+    /// Seconds between checkpoint uploads while training.
+    #[arg(long, default_value_t = 60)]
+    pub checkpoint_every_s: u64,
+    /// Seconds between asks when the queue is empty.
+    #[arg(long, default_value_t = 1.0)]
+    pub poll_s: f64,
+    /// Environments per training job when the job does not say (default: one per core).
+    #[arg(long)]
+    pub envs: Option<usize>,
+    /// This worker's name (default: the host name).
+    #[arg(long)]
+    pub name: Option<String>,
+}
+
+impl WorkerFlags {
+    fn options(&self, coordinator: String, token: Option<String>) -> WorkerOptions {
+        WorkerOptions {
+            coordinator,
+            token,
+            name: self.name.clone().unwrap_or_else(host_name),
+            checkpoint_every_s: self.checkpoint_every_s,
+            poll_s: self.poll_s.clamp(0.05, 60.0),
+            envs: self.envs,
+        }
+    }
+}
+
+fn host_name() -> String {
+    std::fs::read_to_string("/etc/hostname")
+        .map(|s| s.trim().to_string())
+        .ok()
+        .filter(|s| !s.is_empty())
+        .unwrap_or_else(|| "worker".into())
+}
+
+#[derive(clap::Args, Debug)]
+pub struct UpArgs {
+    #[command(flatten)]
+    pub server: ServerConfig,
+    /// A JSON file with the coordinator's settings instead of the flags.
+    #[arg(long, value_name = "FILE")]
+    pub config_file: Option<PathBuf>,
+    /// Local workers (default: one per core).
+    #[arg(long)]
+    pub workers: Option<usize>,
+    #[command(flatten)]
+    pub worker: WorkerFlags,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct WorkerArgs {
+    /// The coordinator's gRPC URL.
+    #[arg(long, default_value = "http://127.0.0.1:50051")]
+    pub coordinator: String,
+    /// The coordinator's bearer token.
+    #[arg(long, env = "CRM_TOKEN")]
+    pub token: Option<String>,
+    #[command(flatten)]
+    pub worker: WorkerFlags,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ServePolicyArgs {
+    #[arg(long)]
+    pub checkpoint: PathBuf,
+    /// Address to serve the Policy gRPC on.
+    #[arg(long, default_value = "127.0.0.1:50052")]
+    pub listen: String,
+}
+
+pub fn up(args: UpArgs) -> anyhow::Result<()> {
+    let config = match &args.config_file {
+        Some(path) => crm_server::config::load(path)?,
+        None => args.server,
+    };
+    config.validate()?;
+    let workers = args
+        .workers
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let options = args.worker.options(String::new(), config.token.clone());
+    up::up_main(config, workers, options)
+}
+
+pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
+    if args.token.as_deref() == Some("") {
+        anyhow::bail!("--token must not be empty");
+    }
+    worker_main(args.worker.options(args.coordinator, args.token))
+}
+
+pub fn serve_policy(args: ServePolicyArgs) -> anyhow::Result<()> {
+    policy::serve_main(&args.checkpoint, &args.listen)
+}

@@ -1,0 +1,155 @@
+//! Checkpoint evaluation: success rate and mean episode length per objective and overall,
+//! over episodes on tasks drawn with a fixed seed (the paper's Table I).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use crm_api::{EvalReport, EvalSpec, Row};
+use crm_learn::{Checkpoint, Layout, Ppo, PpoConfig};
+use grasp_sim::GraspEnv;
+use grasp_sim::benchmark::Objective;
+
+use crate::commands::EnvArgs;
+
+/// A loaded checkpoint ready to act deterministically in its machine.
+pub struct LoadedPolicy {
+    pub ppo: Ppo,
+    pub machine: crm::Machine,
+    pub algorithm: String,
+    pub trained_steps: u64,
+}
+
+impl LoadedPolicy {
+    /// Loads `path` for the machine its algorithm trains in (the flat one for `ppo`).
+    pub fn load(path: &Path, env: &EnvArgs) -> anyhow::Result<Self> {
+        let algorithm = Checkpoint::read_header(path)?.algorithm;
+        let machine = if algorithm == "ppo" {
+            env.machine_or(grasp_sim::spec::flat_spec())?
+        } else {
+            env.machine()?
+        };
+        let (net, header) = Checkpoint::load(path, &machine.spec().hash(), grasp_sim::ENV_VERSION)?;
+        if net.layout() != Layout::of(&machine) {
+            bail!(
+                "checkpoint {}: network layout {:?} does not fit the machine",
+                path.display(),
+                net.layout()
+            );
+        }
+        let config = PpoConfig {
+            hidden: header.hidden.clone(),
+            ..PpoConfig::default()
+        };
+        let mut ppo = Ppo::new(net.layout(), config, 0)?;
+        ppo.net = net;
+        Ok(Self {
+            ppo,
+            machine,
+            algorithm: header.algorithm,
+            trained_steps: header.steps,
+        })
+    }
+}
+
+/// One finished evaluation episode, with the machine's transition history.
+#[derive(Clone, Debug)]
+pub struct EpisodeRecord {
+    pub task: String,
+    pub success: bool,
+    pub length: usize,
+    pub total_return: f64,
+    /// (step, from stage, to stage, event, transition reward).
+    pub transitions: Vec<(usize, String, String, String, f32)>,
+}
+
+/// Evaluates the checkpoint at `path`. After each episode `progress(done, total, record)` is
+/// called; returning `false` stops the evaluation with an error ("cancelled").
+pub fn evaluate(
+    path: &Path,
+    spec: &EvalSpec,
+    env: &EnvArgs,
+    mut progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
+) -> anyhow::Result<EvalReport> {
+    if spec.episodes == 0 {
+        bail!("episodes must be positive");
+    }
+    let benchmark = env.benchmark()?;
+    let LoadedPolicy {
+        mut ppo,
+        machine,
+        algorithm,
+        trained_steps,
+    } = LoadedPolicy::load(path, env)?;
+    let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
+    if let Some(id) = &spec.task {
+        let index = crate::commands::task_index(&benchmark, id)?;
+        grasp.set_task_choice(grasp_sim::TaskChoice::Fixed(index))?;
+    }
+    let mut crm_env = crm::CrmEnv::new(machine, grasp, crm::RewardMode::Crm);
+    let mut sums: BTreeMap<Objective, (u64, u64, u64)> = BTreeMap::new();
+    for k in 0..spec.episodes {
+        let seed = spec.seed.wrapping_mul(1_000_003).wrapping_add(k);
+        let (mut stage, mut state) = crm_env.reset(seed).context("reset")?;
+        let objective = crm_env.env().objective();
+        let (success, length) = loop {
+            let mask = crm_env.machine().action_mask(stage);
+            let (action, _) = ppo.act(&state, stage, &mask, true)?;
+            let step = crm_env.step(&action)?;
+            if step.done || step.truncated {
+                let success = step.done && crm_env.machine().stage_name(step.stage) == "success";
+                break (success, crm_env.episode().steps());
+            }
+            (stage, state) = (step.stage, step.abstract_state);
+        };
+        let entry = sums.entry(objective).or_default();
+        entry.0 += 1;
+        entry.1 += u64::from(success);
+        entry.2 += length as u64;
+        let machine = crm_env.machine();
+        let episode = crm_env.episode();
+        let record = EpisodeRecord {
+            task: crm_env.env().task().id.clone(),
+            success,
+            length,
+            total_return: episode.total_return(),
+            transitions: episode
+                .history()
+                .iter()
+                .map(|t| {
+                    (
+                        t.step,
+                        machine.stage_name(t.from).to_string(),
+                        machine.stage_name(t.to).to_string(),
+                        machine.event_name(t.event).to_string(),
+                        t.reward,
+                    )
+                })
+                .collect(),
+        };
+        if !progress(k + 1, spec.episodes, &record) {
+            bail!("cancelled after {} of {} episodes", k + 1, spec.episodes);
+        }
+    }
+    let row = |(n, wins, length): (u64, u64, u64)| Row {
+        success_rate: wins as f64 / n.max(1) as f64,
+        mean_episode_length: length as f64 / n.max(1) as f64,
+        episodes: n,
+    };
+    let total = sums
+        .values()
+        .fold((0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+    let overall = row(total);
+    Ok(EvalReport {
+        algorithm,
+        trained_steps,
+        episodes: spec.episodes,
+        seed: spec.seed,
+        success_rate: overall.success_rate,
+        mean_episode_length: overall.mean_episode_length,
+        per_objective: sums
+            .into_iter()
+            .map(|(o, s)| (o.name().to_string(), row(s)))
+            .collect(),
+    })
+}

@@ -1,0 +1,215 @@
+//! A training run: vectorized rollouts and PPO updates inside the grasping CRM, one iteration
+//! at a time so that a caller (the CLI's progress bar, the service worker's heartbeat) can
+//! report between them and save checkpoints. A run can start from a checkpoint of the same
+//! machine: it keeps the steps already trained (so the learning-rate steps stay where they
+//! were) and reseeds its environments and noise from (seed, steps), so a resumed run is
+//! reproducible but not the same as the uninterrupted one.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use crm_api::{Algorithm, Iteration, TrainSpec};
+use crm_learn::checkpoint::FORMAT;
+use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, VecEnv};
+use grasp_sim::{GraspEnv, TaskChoice};
+
+use crate::commands::EnvArgs;
+
+/// A run in progress.
+pub struct Trainer {
+    spec: TrainSpec,
+    envs: VecEnv<GraspEnv>,
+    env_count: usize,
+    ppo: Ppo,
+    early_stop: EarlyStop,
+    layout: Layout,
+    spec_hash: String,
+    stage_names: Vec<String>,
+    started: Instant,
+    start_steps: u64,
+    done: u64,
+    iteration: u64,
+    stopped_early: bool,
+}
+
+impl Trainer {
+    /// Sets up the environments and the learner; `init` is a checkpoint to resume from.
+    pub fn new(spec: TrainSpec, env: &EnvArgs, init: Option<&Path>) -> anyhow::Result<Self> {
+        if spec.steps == 0 {
+            bail!("steps must be positive");
+        }
+        if !spec.algorithm.available() {
+            bail!(
+                "algorithm {} is not available yet; use crm-ppo, ippo, lppo or ppo",
+                spec.algorithm.name()
+            );
+        }
+        spec.config.validate()?;
+        let benchmark = env.benchmark()?;
+        let machine = match spec.algorithm {
+            Algorithm::Ppo => env.machine_or(grasp_sim::spec::flat_spec())?,
+            _ => env.machine()?,
+        };
+        let choice = match &spec.task {
+            Some(id) => TaskChoice::Fixed(crate::commands::task_index(&benchmark, id)?),
+            None => TaskChoice::Random,
+        };
+        let env_count = spec.envs.unwrap_or_else(rayon::current_num_threads);
+        if env_count == 0 {
+            bail!("envs must be at least 1");
+        }
+        let spec_hash = machine.spec().hash();
+        let layout = Layout::of(&machine);
+        let resume = match init {
+            Some(path) => {
+                let (net, header) = Checkpoint::load(path, &spec_hash, grasp_sim::ENV_VERSION)?;
+                if header.algorithm != spec.algorithm.name() {
+                    bail!(
+                        "checkpoint {} was trained with {}, not {}",
+                        path.display(),
+                        header.algorithm,
+                        spec.algorithm.name()
+                    );
+                }
+                Some((net, header.steps))
+            }
+            None => None,
+        };
+        let start_steps = resume.as_ref().map_or(0, |(_, steps)| *steps);
+        let seed = if start_steps == 0 {
+            spec.seed
+        } else {
+            spec.seed ^ start_steps.wrapping_mul(0xD1B5_4A32_D192_ED03)
+        };
+        let mut ppo = Ppo::new(layout, spec.config.clone(), seed)?;
+        if let Some((net, _)) = &resume {
+            ppo.load_weights(net)
+                .context("resuming from the checkpoint")?;
+        }
+        let envs = (0..env_count)
+            .map(|_| {
+                let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
+                grasp.set_task_choice(choice)?;
+                Ok(crm::CrmEnv::new(
+                    machine.clone(),
+                    grasp,
+                    super::reward_mode(spec.algorithm),
+                ))
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let envs = VecEnv::new(envs, seed)?;
+        let stage_names = (0..layout.stages)
+            .map(|s| machine.stage_name(s).to_string())
+            .collect();
+        Ok(Self {
+            early_stop: EarlyStop::new(
+                spec.config.early_stop_window,
+                spec.config.early_stop_success,
+            ),
+            spec,
+            envs,
+            env_count,
+            ppo,
+            layout,
+            spec_hash,
+            stage_names,
+            started: Instant::now(),
+            start_steps,
+            done: start_steps,
+            iteration: 0,
+            stopped_early: false,
+        })
+    }
+
+    pub fn spec(&self) -> &TrainSpec {
+        &self.spec
+    }
+
+    /// Environment steps trained so far (a resumed run starts at the checkpoint's).
+    pub fn steps(&self) -> u64 {
+        self.done
+    }
+
+    /// Whether the budget is spent or the early-stop rule fired.
+    pub fn finished(&self) -> bool {
+        self.done >= self.spec.steps || self.stopped_early
+    }
+
+    pub fn stopped_early(&self) -> bool {
+        self.stopped_early
+    }
+
+    /// One rollout and one PPO update.
+    pub fn iterate(&mut self) -> anyhow::Result<Iteration> {
+        let config = &self.spec.config;
+        let remaining = self.spec.steps.saturating_sub(self.done) as usize;
+        let steps = config.rollout_steps.min(remaining.max(1));
+        let rollout = self
+            .envs
+            .collect(&mut self.ppo, steps.div_ceil(self.env_count))?;
+        self.done += rollout.len() as u64;
+        let stats = self
+            .ppo
+            .update(&rollout, self.done as f64 / self.spec.steps as f64)?;
+        self.iteration += 1;
+        for &(success, _, _) in &rollout.episodes {
+            self.stopped_early |= self.early_stop.record(success);
+        }
+        let episodes = rollout.episodes.len() as u64;
+        let per_episode = |total: f64| total / episodes.max(1) as f64;
+        let mut mix = vec![0usize; self.layout.stages];
+        for &stage in &rollout.stages {
+            mix[stage] += 1;
+        }
+        let elapsed = self.started.elapsed().as_secs_f64();
+        Ok(Iteration {
+            iteration: self.iteration,
+            steps: self.done,
+            wall_s: elapsed,
+            steps_per_s: (self.done - self.start_steps) as f64 / elapsed.max(1e-9),
+            episodes,
+            successes: rollout.episodes.iter().filter(|e| e.0).count() as u64,
+            success_rate_last_100: f64::from(self.early_stop.success_rate()),
+            mean_return: per_episode(rollout.episodes.iter().map(|e| f64::from(e.2)).sum()),
+            mean_intra_return: per_episode(rollout.intra.iter().map(|&r| f64::from(r)).sum()),
+            mean_transition_return: per_episode(
+                rollout.transition.iter().map(|&r| f64::from(r)).sum(),
+            ),
+            mean_episode_length: per_episode(rollout.episodes.iter().map(|e| e.1 as f64).sum()),
+            stage_mix: mix
+                .iter()
+                .zip(&self.stage_names)
+                .filter(|(count, _)| **count > 0)
+                .map(|(count, name)| (name.clone(), *count as f64 / rollout.len().max(1) as f64))
+                .collect(),
+            policy_loss: f64::from(stats.policy_loss),
+            value_loss: f64::from(stats.value_loss),
+            entropy: f64::from(stats.entropy),
+            approx_kl: f64::from(stats.approx_kl),
+            clipfrac: f64::from(stats.clipfrac),
+            learning_rate: stats.learning_rate,
+        })
+    }
+
+    /// Writes the current networks as a checkpoint.
+    pub fn save(&self, path: &Path) -> anyhow::Result<()> {
+        let header = CheckpointHeader {
+            format: FORMAT.to_string(),
+            algorithm: self.spec.algorithm.name().to_string(),
+            spec_hash: self.spec_hash.clone(),
+            env_version: grasp_sim::ENV_VERSION.to_string(),
+            seed: self.spec.seed,
+            steps: self.done,
+            layout: self.layout,
+            hidden: self.spec.config.hidden.clone(),
+            config: serde_json::to_value(&self.spec.config)?,
+        };
+        // Write beside and rename, so a reader never sees half a checkpoint.
+        let partial = path.with_extension("safetensors.partial");
+        Checkpoint::save(&self.ppo.net, &header, &partial)?;
+        std::fs::rename(&partial, path)
+            .with_context(|| format!("moving the checkpoint to {}", path.display()))?;
+        Ok(())
+    }
+}

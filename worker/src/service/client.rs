@@ -1,0 +1,155 @@
+//! A coordinator client that adds the bearer token to every call, and the calls a job makes.
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use crm_proto::pb::coordinator_client::CoordinatorClient;
+use crm_proto::pb::{self, checkpoint_chunk};
+use tonic::metadata::{Ascii, MetadataValue};
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::Channel;
+
+/// Adds `authorization: Bearer <token>` when a token is set.
+#[derive(Clone)]
+pub struct AddToken(Option<MetadataValue<Ascii>>);
+
+impl tonic::service::Interceptor for AddToken {
+    fn call(
+        &mut self,
+        mut request: tonic::Request<()>,
+    ) -> Result<tonic::Request<()>, tonic::Status> {
+        if let Some(value) = &self.0 {
+            request
+                .metadata_mut()
+                .insert("authorization", value.clone());
+        }
+        Ok(request)
+    }
+}
+
+/// A connected, registered worker.
+#[derive(Clone)]
+pub struct Client {
+    pub inner: CoordinatorClient<InterceptedService<Channel, AddToken>>,
+    pub worker_id: String,
+    pub heartbeat: Duration,
+}
+
+/// Bytes per uploaded chunk.
+const CHUNK: usize = 256 * 1024;
+
+impl Client {
+    pub async fn connect(url: &str, token: Option<&str>) -> anyhow::Result<Self> {
+        let token = match token {
+            Some(t) => Some(
+                format!("Bearer {t}")
+                    .parse()
+                    .context("--token: not a valid header value")?,
+            ),
+            None => None,
+        };
+        let channel = Channel::from_shared(url.to_string())
+            .with_context(|| format!("--coordinator: {url:?} is not a URL"))?
+            .connect_timeout(Duration::from_secs(5))
+            .connect()
+            .await
+            .with_context(|| format!("connecting to {url}"))?;
+        let inner = CoordinatorClient::with_interceptor(channel, AddToken(token))
+            .max_decoding_message_size(8 << 20);
+        Ok(Self {
+            inner,
+            worker_id: String::new(),
+            heartbeat: Duration::from_secs(5),
+        })
+    }
+
+    /// Downloads checkpoint `id` to `path`.
+    pub async fn download(&self, id: i64, path: &Path) -> anyhow::Result<pb::CheckpointMeta> {
+        let mut stream = self
+            .inner
+            .clone()
+            .download_checkpoint(pb::DownloadRequest {
+                worker_id: self.worker_id.clone(),
+                checkpoint_id: id,
+            })
+            .await?
+            .into_inner();
+        let meta = match stream.message().await? {
+            Some(pb::CheckpointChunk {
+                body: Some(checkpoint_chunk::Body::Meta(meta)),
+            }) => meta,
+            _ => bail!("checkpoint {id}: the coordinator sent no metadata"),
+        };
+        let mut bytes = Vec::with_capacity(meta.size as usize);
+        while let Some(chunk) = stream.message().await? {
+            if let Some(checkpoint_chunk::Body::Data(data)) = chunk.body {
+                bytes.extend_from_slice(&data);
+            }
+        }
+        if bytes.len() as u64 != meta.size {
+            bail!(
+                "checkpoint {id}: got {} bytes of {}",
+                bytes.len(),
+                meta.size
+            );
+        }
+        tokio::fs::write(path, &bytes).await?;
+        Ok(meta)
+    }
+
+    /// Uploads the checkpoint at `path` for `job`; returns its id.
+    pub async fn upload(
+        &self,
+        job: i64,
+        algorithm: &str,
+        steps: u64,
+        path: &Path,
+    ) -> anyhow::Result<i64> {
+        let bytes = tokio::fs::read(path).await?;
+        let meta = pb::CheckpointChunk {
+            body: Some(checkpoint_chunk::Body::Meta(pb::CheckpointMeta {
+                job_id: job,
+                worker_id: self.worker_id.clone(),
+                steps,
+                algorithm: algorithm.to_string(),
+                size: bytes.len() as u64,
+            })),
+        };
+        let chunks: Vec<pb::CheckpointChunk> = std::iter::once(meta)
+            .chain(bytes.chunks(CHUNK).map(|c| pb::CheckpointChunk {
+                body: Some(checkpoint_chunk::Body::Data(c.to_vec())),
+            }))
+            .collect();
+        let reply = self
+            .inner
+            .clone()
+            .upload_checkpoint(tokio_stream::iter(chunks))
+            .await?;
+        Ok(reply.into_inner().checkpoint_id)
+    }
+
+    pub async fn complete(&self, job: i64, result: &serde_json::Value) -> anyhow::Result<()> {
+        self.inner
+            .clone()
+            .complete(pb::CompleteRequest {
+                worker_id: self.worker_id.clone(),
+                job_id: job,
+                result_json: result.to_string(),
+            })
+            .await?;
+        Ok(())
+    }
+
+    pub async fn fail(&self, job: i64, message: &str) -> anyhow::Result<()> {
+        self.inner
+            .clone()
+            .fail(pb::FailRequest {
+                worker_id: self.worker_id.clone(),
+                job_id: job,
+                message: message.to_string(),
+            })
+            .await?;
+        Ok(())
+    }
+}

@@ -1,0 +1,121 @@
+//! The service side of the `crm` binary: a rollout worker that leases jobs from the
+//! coordinator over gRPC and runs them with the learners (`crm worker`), the `Policy` gRPC
+//! server for a trained checkpoint (`crm serve-policy`), and `crm up`, which starts the
+//! coordinator and local workers in one process.
+
+pub mod client;
+pub mod policy;
+pub mod run;
+pub mod up;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::Context;
+use crm_proto::pb;
+
+pub use client::Client;
+
+/// How a worker behaves.
+#[derive(Clone, Debug)]
+pub struct WorkerOptions {
+    /// The coordinator's gRPC URL, e.g. `http://127.0.0.1:50051`.
+    pub coordinator: String,
+    pub token: Option<String>,
+    pub name: String,
+    /// Seconds between checkpoint uploads while training.
+    pub checkpoint_every_s: u64,
+    /// Seconds between asks when the queue is empty.
+    pub poll_s: f64,
+    /// Environments per training job when the job does not say (default: one per core).
+    pub envs: Option<usize>,
+}
+
+/// Leases and runs jobs until `stop` is set. Reconnects when the coordinator goes away.
+pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
+    let mut backoff = Duration::from_millis(200);
+    while !stop.load(Ordering::Relaxed) {
+        let mut client = match Client::connect(&options.coordinator, options.token.as_deref()).await
+        {
+            Ok(client) => client,
+            Err(err) => {
+                tracing::warn!(%err, coordinator = options.coordinator, "cannot reach the coordinator; retrying");
+                tokio::time::sleep(backoff).await;
+                backoff = (backoff * 2).min(Duration::from_secs(5));
+                continue;
+            }
+        };
+        let registration = match client
+            .inner
+            .register(pb::RegisterRequest {
+                name: options.name.clone(),
+                cores: std::thread::available_parallelism().map_or(1, |n| n.get() as u32),
+                version: env!("CARGO_PKG_VERSION").into(),
+            })
+            .await
+        {
+            Ok(reply) => reply.into_inner(),
+            Err(status) if status.code() == tonic::Code::Unauthenticated => {
+                anyhow::bail!("the coordinator refused this worker: {}", status.message());
+            }
+            Err(status) => {
+                tracing::warn!(%status, "register failed; retrying");
+                tokio::time::sleep(backoff).await;
+                backoff = (backoff * 2).min(Duration::from_secs(5));
+                continue;
+            }
+        };
+        backoff = Duration::from_millis(200);
+        tracing::info!(worker = registration.worker_id, "registered");
+        client.worker_id = registration.worker_id;
+        client.heartbeat = Duration::from_secs(u64::from(registration.heartbeat_interval_s.max(1)));
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(());
+            }
+            let lease = client
+                .inner
+                .lease(pb::LeaseRequest {
+                    worker_id: client.worker_id.clone(),
+                })
+                .await;
+            match lease {
+                Ok(reply) => match reply.into_inner().job {
+                    Some(job) => {
+                        let id = job.job_id;
+                        if let Err(err) = run::run_job(&client, &options, job).await {
+                            tracing::error!(job = id, err = format!("{err:#}"), "job failed");
+                            client.fail(id, &format!("{err:#}")).await.ok();
+                        }
+                    }
+                    None => tokio::time::sleep(Duration::from_secs_f64(options.poll_s)).await,
+                },
+                Err(status) if status.code() == tonic::Code::Unauthenticated => {
+                    anyhow::bail!("the coordinator refused this worker: {}", status.message());
+                }
+                Err(status) => {
+                    tracing::warn!(%status, "lease failed; reconnecting");
+                    tokio::time::sleep(backoff).await;
+                    break;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `crm worker`'s entry: runs until ctrl-c.
+pub fn worker_main(options: WorkerOptions) -> anyhow::Result<()> {
+    crm_server::init_logging();
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(async move {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        tokio::spawn(async move {
+            tokio::signal::ctrl_c().await.ok();
+            flag.store(true, Ordering::Relaxed);
+        });
+        run_worker(options, stop).await
+    })
+}

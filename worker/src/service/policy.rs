@@ -1,0 +1,153 @@
+//! `crm serve-policy`: the `Policy` gRPC service over one checkpoint, for a robot or a remote
+//! evaluator. The caller sends the environment's full observation and its CRM stage; the
+//! service applies the stage's state abstraction and returns the deterministic action (zero
+//! outside the stage's action set), the stage and the critic's value.
+
+use std::path::Path;
+use std::sync::Mutex;
+
+use crm_proto::pb;
+use crm_proto::pb::policy_server::{Policy, PolicyServer};
+use grasp_sim::observation::{ACTIONS, FEATURES};
+use tonic::{Request, Response, Status};
+
+use crate::commands::EnvArgs;
+use crate::jobs::eval::LoadedPolicy;
+
+pub struct PolicyService {
+    policy: Mutex<LoadedPolicy>,
+    info: pb::PolicyInfo,
+}
+
+impl PolicyService {
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let policy = LoadedPolicy::load(path, &EnvArgs::default())?;
+        let machine = &policy.machine;
+        let info = pb::PolicyInfo {
+            algorithm: policy.algorithm.clone(),
+            trained_steps: policy.trained_steps,
+            spec_hash: machine.spec().hash(),
+            env_version: grasp_sim::ENV_VERSION.into(),
+            features: FEATURES.iter().map(|s| s.to_string()).collect(),
+            actions: ACTIONS.iter().map(|s| s.to_string()).collect(),
+            stages: (0..machine.stage_count())
+                .map(|s| machine.stage_name(s).to_string())
+                .collect(),
+            initial_stage: machine.stage_name(machine.initial()).to_string(),
+        };
+        Ok(Self {
+            policy: Mutex::new(policy),
+            info,
+        })
+    }
+
+    pub fn into_server(self) -> PolicyServer<Self> {
+        PolicyServer::new(self)
+    }
+
+    /// The action, stage name and value for one request.
+    pub fn act(&self, request: &pb::ActRequest) -> Result<pb::ActReply, Status> {
+        if request.observation.len() != FEATURES.len() {
+            return Err(Status::invalid_argument(format!(
+                "observation: expected {} values, got {}",
+                FEATURES.len(),
+                request.observation.len()
+            )));
+        }
+        if let Some(k) = request.observation.iter().position(|v| !v.is_finite()) {
+            return Err(Status::invalid_argument(format!(
+                "observation[{k}] ({}) is not finite",
+                FEATURES[k]
+            )));
+        }
+        let mut guard = self
+            .policy
+            .lock()
+            .map_err(|_| Status::internal("policy lock poisoned"))?;
+        let policy = &mut *guard;
+        let machine = &policy.machine;
+        let stage = if request.stage.is_empty() {
+            machine.initial()
+        } else {
+            machine.stage_id(&request.stage).ok_or_else(|| {
+                Status::invalid_argument(format!(
+                    "stage: unknown stage {:?} (one of {})",
+                    request.stage,
+                    self.info.stages.join(", ")
+                ))
+            })?
+        };
+        if machine.is_terminal(stage) {
+            return Err(Status::invalid_argument(format!(
+                "stage: {} is terminal; the episode is over",
+                machine.stage_name(stage)
+            )));
+        }
+        let internal = |e: &dyn std::fmt::Display| Status::internal(e.to_string());
+        let state = machine
+            .abstract_state(stage, &request.observation)
+            .map_err(|e| internal(&e))?;
+        let mask = machine.action_mask(stage);
+        let stage_name = machine.stage_name(stage).to_string();
+        let (action, _) = policy
+            .ppo
+            .act(&state, stage, &mask, true)
+            .map_err(|e| internal(&e))?;
+        let net = &policy.ppo.net;
+        let value = net
+            .input(&[state], &[stage])
+            .and_then(|input| net.value(&input))
+            .and_then(|v| Ok(v.to_vec1::<f32>()?))
+            .map_err(|e| internal(&e))?;
+        Ok(pb::ActReply {
+            action: action.iter().zip(&mask).map(|(a, m)| a * m).collect(),
+            stage: stage_name,
+            value: value.first().copied().unwrap_or(0.0),
+        })
+    }
+}
+
+#[tonic::async_trait]
+impl Policy for PolicyService {
+    async fn describe(
+        &self,
+        _: Request<pb::DescribeRequest>,
+    ) -> Result<Response<pb::PolicyInfo>, Status> {
+        Ok(Response::new(self.info.clone()))
+    }
+
+    async fn act(
+        &self,
+        request: Request<pb::ActRequest>,
+    ) -> Result<Response<pb::ActReply>, Status> {
+        Ok(Response::new(PolicyService::act(self, request.get_ref())?))
+    }
+}
+
+/// `crm serve-policy`'s entry: serves until ctrl-c.
+pub fn serve_main(checkpoint: &Path, listen: &str) -> anyhow::Result<()> {
+    crm_server::init_logging();
+    let service = PolicyService::load(checkpoint)?;
+    let addr: std::net::SocketAddr = listen
+        .parse()
+        .map_err(|e| anyhow::anyhow!("--listen: {listen:?} is not an address ({e})"))?;
+    let runtime = tokio::runtime::Runtime::new()?;
+    runtime.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(addr).await?;
+        let bound = listener.local_addr()?;
+        println!(
+            "crm serve-policy: gRPC Policy on http://{bound} ({})",
+            service.info.algorithm
+        );
+        tonic::transport::Server::builder()
+            .add_service(service.into_server())
+            .serve_with_incoming_shutdown(
+                tokio_stream::wrappers::TcpListenerStream::new(listener),
+                async {
+                    tokio::signal::ctrl_c().await.ok();
+                },
+            )
+            .await?;
+        Ok(())
+    })
+}

@@ -1,0 +1,262 @@
+//! Running one leased job: heartbeats on a timer (a cancelled or lost lease stops the job),
+//! progress on a client stream, checkpoints uploaded periodically and at the end; training
+//! resumes from the checkpoint the lease names. The learning itself runs on a blocking
+//! thread (it uses rayon for the environments).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use crm_api::{EvalSpec, TrainSpec};
+use crm_proto::pb::{self, progress};
+use tokio::sync::mpsc;
+
+use super::{Client, WorkerOptions};
+use crate::commands::EnvArgs;
+use crate::jobs::eval::evaluate;
+use crate::jobs::train::Trainer;
+
+/// A scratch folder removed on drop.
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.0).ok();
+    }
+}
+
+/// What the blocking part needs to talk to the coordinator.
+struct Link {
+    client: Client,
+    job: i64,
+    handle: tokio::runtime::Handle,
+    progress: mpsc::Sender<pb::Progress>,
+    cancelled: Arc<AtomicBool>,
+}
+
+impl Link {
+    fn send(&self, body: progress::Body) -> anyhow::Result<()> {
+        self.progress
+            .blocking_send(pb::Progress {
+                worker_id: self.client.worker_id.clone(),
+                job_id: self.job,
+                body: Some(body),
+            })
+            .map_err(|_| anyhow::anyhow!("the progress stream closed (lease lost?)"))
+    }
+
+    fn stopped(&self) -> bool {
+        self.cancelled.load(Ordering::Relaxed)
+    }
+}
+
+/// Runs `job` to its end: completes it, or returns the error for the caller to report.
+pub async fn run_job(client: &Client, options: &WorkerOptions, job: pb::Job) -> anyhow::Result<()> {
+    let id = job.job_id;
+    tracing::info!(
+        job = id,
+        kind = job.kind,
+        attempt = job.attempt,
+        "running job"
+    );
+    let cancelled = Arc::new(AtomicBool::new(false));
+    let heartbeat = {
+        let mut inner = client.inner.clone();
+        let request = pb::HeartbeatRequest {
+            worker_id: client.worker_id.clone(),
+            job_id: id,
+        };
+        let (period, flag) = (client.heartbeat, cancelled.clone());
+        tokio::spawn(async move {
+            loop {
+                tokio::time::sleep(period).await;
+                match inner.heartbeat(request.clone()).await {
+                    Ok(reply) if reply.get_ref().stop => {
+                        tracing::warn!(
+                            job = request.job_id,
+                            "job cancelled or lease lost; stopping"
+                        );
+                        flag.store(true, Ordering::Relaxed);
+                        return;
+                    }
+                    Ok(_) => {}
+                    Err(status) => tracing::warn!(%status, "heartbeat failed"),
+                }
+            }
+        })
+    };
+    let (tx, rx) = mpsc::channel(256);
+    let reporter = {
+        let mut inner = client.inner.clone();
+        tokio::spawn(async move {
+            inner
+                .report_progress(tokio_stream::wrappers::ReceiverStream::new(rx))
+                .await
+        })
+    };
+    let scratch = Scratch(std::env::temp_dir().join(format!(
+        "crm-worker-{}-job{id}-{}",
+        std::process::id(),
+        crm_server::store::now_ms()
+    )));
+    std::fs::create_dir_all(&scratch.0)?;
+    let link = Link {
+        client: client.clone(),
+        job: id,
+        handle: tokio::runtime::Handle::current(),
+        progress: tx,
+        cancelled: cancelled.clone(),
+    };
+    let dir = scratch.0.clone();
+    let options = options.clone();
+    let outcome = tokio::task::spawn_blocking(move || match job.kind.as_str() {
+        "train" => train(&link, &options, &job, &dir),
+        "eval" => eval(&link, &job, &dir),
+        other => bail!("unknown job kind {other:?}"),
+    })
+    .await
+    .context("the job's thread panicked");
+    heartbeat.abort();
+    // All progress is delivered before the job is completed.
+    let streamed = reporter.await;
+    let result = outcome??;
+    if let Ok(Err(status)) = &streamed
+        && !cancelled.load(Ordering::Relaxed)
+    {
+        tracing::warn!(%status, "progress stream ended with an error");
+    }
+    match result {
+        Some(value) => client.complete(id, &value).await,
+        None => {
+            tracing::info!(job = id, "stopped");
+            Ok(())
+        }
+    }
+}
+
+fn train(
+    link: &Link,
+    options: &WorkerOptions,
+    job: &pb::Job,
+    dir: &Path,
+) -> anyhow::Result<Option<serde_json::Value>> {
+    let mut spec: TrainSpec = serde_json::from_str(&job.spec_json).context("the job's spec")?;
+    if spec.envs.is_none() {
+        spec.envs = options.envs;
+    }
+    let init = if job.checkpoint_id != 0 {
+        let path = dir.join("resume.safetensors");
+        link.handle
+            .block_on(link.client.download(job.checkpoint_id, &path))
+            .context("downloading the checkpoint to resume from")?;
+        Some(path)
+    } else {
+        None
+    };
+    let algorithm = spec.algorithm.name();
+    let mut trainer = Trainer::new(spec.clone(), &EnvArgs::default(), init.as_deref())?;
+    let resumed_from = trainer.steps();
+    if resumed_from > 0 {
+        tracing::info!(
+            job = job.job_id,
+            steps = resumed_from,
+            "resumed from checkpoint"
+        );
+    }
+    let path = dir.join("checkpoint.safetensors");
+    let every = Duration::from_secs(options.checkpoint_every_s.max(1));
+    let mut last_upload = Instant::now();
+    // (steps, id) of the newest upload, so the final one is not sent twice.
+    let mut uploaded: Option<(u64, i64)> = None;
+    let mut upload = |trainer: &Trainer| -> anyhow::Result<i64> {
+        if let Some((steps, id)) = uploaded
+            && steps == trainer.steps()
+        {
+            return Ok(id);
+        }
+        trainer.save(&path)?;
+        let id = link
+            .handle
+            .block_on(
+                link.client
+                    .upload(job.job_id, algorithm, trainer.steps(), &path),
+            )
+            .context("uploading a checkpoint")?;
+        uploaded = Some((trainer.steps(), id));
+        Ok(id)
+    };
+    while !trainer.finished() {
+        if link.stopped() {
+            return Ok(None);
+        }
+        let it = trainer.iterate()?;
+        link.send(progress::Body::IterationJson(serde_json::to_string(&it)?))?;
+        if last_upload.elapsed() >= every {
+            upload(&trainer)?;
+            last_upload = Instant::now();
+        }
+    }
+    if link.stopped() {
+        return Ok(None);
+    }
+    let checkpoint_id = upload(&trainer)?;
+    Ok(Some(serde_json::json!({
+        "steps": trainer.steps(),
+        "stopped_early": trainer.stopped_early(),
+        "resumed_from_steps": resumed_from,
+        "checkpoint_id": checkpoint_id,
+    })))
+}
+
+fn eval(link: &Link, job: &pb::Job, dir: &Path) -> anyhow::Result<Option<serde_json::Value>> {
+    let spec: EvalSpec = serde_json::from_str(&job.spec_json).context("the job's spec")?;
+    let path = dir.join("eval.safetensors");
+    link.handle
+        .block_on(link.client.download(job.checkpoint_id, &path))
+        .context("downloading the checkpoint")?;
+    let mut last = Instant::now();
+    let mut send_failed = None;
+    let report = evaluate(&path, &spec, &EnvArgs::default(), |done, total, record| {
+        let episode = progress::Body::Episode(pb::EpisodeSummary {
+            task: record.task.clone(),
+            success: record.success,
+            length: record.length as u32,
+            episode_return: record.total_return as f32,
+            transitions: record
+                .transitions
+                .iter()
+                .map(|(step, from, to, event, reward)| pb::Transition {
+                    step: *step as u32,
+                    from_stage: from.clone(),
+                    to_stage: to.clone(),
+                    event: event.clone(),
+                    reward: *reward,
+                })
+                .collect(),
+        });
+        let mut sent = link.send(episode);
+        if sent.is_ok() && (done == total || last.elapsed() >= Duration::from_secs(1)) {
+            last = Instant::now();
+            sent = link.send(progress::Body::Eval(pb::EvalProgress {
+                episodes_done: done,
+                episodes_total: total,
+            }));
+        }
+        if let Err(err) = sent {
+            send_failed = Some(err);
+            return false;
+        }
+        !link.stopped()
+    });
+    if link.stopped() {
+        return Ok(None);
+    }
+    if let Some(err) = send_failed {
+        return Err(err);
+    }
+    let mut value = serde_json::to_value(report?)?;
+    value["checkpoint_id"] = serde_json::Value::from(job.checkpoint_id);
+    Ok(Some(value))
+}
