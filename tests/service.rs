@@ -121,6 +121,14 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
             "config.gama",
         ),
         (r#"{"kind": "eval", "checkpoint_id": 999}"#, "checkpoint_id"),
+        (
+            r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "topology": "claw"}"#,
+            "topology",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "tasks": ["mug-wrap", "nope"]}"#,
+            "tasks[1]",
+        ),
         (r#"{"kind": "fly"}"#, "kind"),
         ("not json", "body"),
     ];

@@ -53,6 +53,11 @@ impl Algorithm {
     }
 }
 
+/// The task ids a job names (`task` then `tasks`); empty means random tasks.
+pub fn task_list(task: &Option<String>, tasks: &[String]) -> Vec<String> {
+    task.iter().chain(tasks).cloned().collect()
+}
+
 /// A training job's parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -65,6 +70,14 @@ pub struct TrainSpec {
     /// One task id, or random tasks over the benchmark.
     #[serde(default)]
     pub task: Option<String>,
+    /// Several task ids: episodes draw among them (with `task`, if given).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tasks: Vec<String>,
+    /// The grasp topology: absent or `"task"` for each task's assigned one, `"auto"` for the
+    /// selection network's pick (paper, section II-B), or a topology name forced on every
+    /// task.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topology: Option<String>,
     /// Environments stepped in parallel (default: one per core of the worker). Results
     /// depend on this number and the seed, not on the thread count.
     #[serde(default)]
@@ -86,6 +99,14 @@ pub struct EvalSpec {
     /// One task id, or random tasks over the benchmark.
     #[serde(default)]
     pub task: Option<String>,
+    /// Several task ids: episodes draw among them (with `task`, if given).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tasks: Vec<String>,
+    /// The grasp topology: absent or `"task"` for each task's assigned one, `"auto"` for the
+    /// selection network's pick (paper, section II-B), or a topology name forced on every
+    /// task.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topology: Option<String>,
 }
 
 fn default_episodes() -> u64 {
@@ -98,6 +119,8 @@ impl Default for EvalSpec {
             episodes: default_episodes(),
             seed: 0,
             task: None,
+            tasks: Vec::new(),
+            topology: None,
         }
     }
 }

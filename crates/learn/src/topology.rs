@@ -184,7 +184,12 @@ impl TopologyNet {
     /// Loads a saved network; returns it with its input and output names.
     pub fn load(path: &Path) -> Result<(Self, Vec<String>, Vec<String>)> {
         let bytes = std::fs::read(path).map_err(|e| refuse(path, format!("cannot read: {e}")))?;
-        let (_, metadata) = safetensors::SafeTensors::read_metadata(&bytes)
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// Loads a saved network from its bytes; `path` names it in errors.
+    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<(Self, Vec<String>, Vec<String>)> {
+        let (_, metadata) = safetensors::SafeTensors::read_metadata(bytes)
             .map_err(|e| refuse(path, format!("not a safetensors file ({e})")))?;
         let header: serde_json::Value = metadata
             .metadata()
@@ -215,7 +220,7 @@ impl TopologyNet {
                 .unwrap_or_default()
         };
         let net = Self::new(size("inputs")?, size("hidden")?, size("outputs")?, 0)?;
-        let tensors = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)?;
+        let tensors = candle_core::safetensors::load_buffer(bytes, &Device::Cpu)?;
         for (name, var) in &net.params {
             let tensor = tensors
                 .get(name)

@@ -6,7 +6,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::prelude::*;
 
-use crate::benchmark::{Benchmark, Objective, Task};
+use crate::benchmark::{Benchmark, Objective, Task, Topology};
 use crate::config::SimConfig;
 use crate::contacts::{ContactMetrics, object_contacts};
 use crate::error::{Error, Result};
@@ -16,12 +16,14 @@ use crate::observation::{ACTIONS, MAX_FINGER_STEP, MAX_PALM_STEP, ObservationPar
 use crate::scene::{self, Scene};
 
 /// Which task an episode runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub enum TaskChoice {
     /// Drawn uniformly from the benchmark with the episode's seed.
     Random,
     /// Always this task (index into the benchmark's tasks).
     Fixed(usize),
+    /// Drawn uniformly from these tasks (indices) with the episode's seed.
+    Subset(Vec<usize>),
 }
 
 /// The grasping environment: one world, rebuilt at every reset from the episode's seed.
@@ -29,6 +31,8 @@ pub struct GraspEnv {
     config: SimConfig,
     benchmark: Arc<Benchmark>,
     choice: TaskChoice,
+    /// Per-task topology overrides (forced, or the selection network's picks).
+    topologies: Option<Vec<Topology>>,
     task_index: usize,
     scene: Option<Scene>,
     judge: Option<Judge>,
@@ -47,6 +51,7 @@ impl GraspEnv {
             config,
             benchmark,
             choice: TaskChoice::Random,
+            topologies: None,
             task_index: 0,
             scene: None,
             judge: None,
@@ -62,13 +67,43 @@ impl GraspEnv {
 
     /// Picks the task of the next resets.
     pub fn set_task_choice(&mut self, choice: TaskChoice) -> Result<()> {
-        if let TaskChoice::Fixed(index) = choice
-            && index >= self.benchmark.tasks.len()
-        {
+        let tasks = self.benchmark.tasks.len();
+        let bad = match &choice {
+            TaskChoice::Random => None,
+            TaskChoice::Fixed(index) => Some(*index).filter(|&i| i >= tasks),
+            TaskChoice::Subset(list) if list.is_empty() => Some(tasks),
+            TaskChoice::Subset(list) => list.iter().copied().find(|&i| i >= tasks),
+        };
+        if let Some(index) = bad {
             return Err(Error::UnknownTask(format!("#{index}")));
         }
         self.choice = choice;
         Ok(())
+    }
+
+    /// Overrides each task's grasp topology (one entry per task of the benchmark), or goes
+    /// back to the benchmark's assigned topologies with `None`. Applies from the next reset.
+    pub fn set_topologies(&mut self, per_task: Option<Vec<Topology>>) -> Result<()> {
+        if let Some(list) = &per_task
+            && list.len() != self.benchmark.tasks.len()
+        {
+            return Err(Error::UnknownTask(format!(
+                "topology overrides for {} tasks, the benchmark has {}",
+                list.len(),
+                self.benchmark.tasks.len()
+            )));
+        }
+        self.topologies = per_task;
+        Ok(())
+    }
+
+    /// The grasp topology of the current task: the override, or the benchmark's.
+    pub fn topology(&self) -> Topology {
+        self.topologies
+            .as_ref()
+            .map_or(self.benchmark.tasks[self.task_index].topology, |t| {
+                t[self.task_index]
+            })
     }
 
     pub fn config(&self) -> &SimConfig {
@@ -136,7 +171,9 @@ impl GraspEnv {
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         self.task_index = task_index;
-        let task = &self.benchmark.tasks[task_index];
+        let mut task = self.benchmark.tasks[task_index].clone();
+        task.topology = self.topology();
+        let task = &task;
         let object = self.benchmark.object_of(task);
         let scene = scene::build(task, object, &self.config, &mut rng);
         let mut judge = Judge::new(
@@ -158,12 +195,11 @@ impl GraspEnv {
 
     /// Resets with the task picked by the task choice.
     pub fn reset_seeded(&mut self, seed: u64) -> Result<Vec<f32>> {
-        let task = match self.choice {
-            TaskChoice::Fixed(index) => index,
-            TaskChoice::Random => {
-                let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7a5c_0b5e_55ed_1234);
-                rng.random_range(0..self.benchmark.tasks.len())
-            }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7a5c_0b5e_55ed_1234);
+        let task = match &self.choice {
+            TaskChoice::Fixed(index) => *index,
+            TaskChoice::Random => rng.random_range(0..self.benchmark.tasks.len()),
+            TaskChoice::Subset(list) => list[rng.random_range(0..list.len())],
         };
         self.reset_task(task, seed)
     }
@@ -190,6 +226,7 @@ impl GraspEnv {
     /// observation, the events that hold and whether the time limit was hit.
     pub fn step_action(&mut self, action: &[f32]) -> Result<crm::EnvStep> {
         Self::check_action(action)?;
+        let shape = self.topology().shape();
         let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
         let mut clipped = 0u64;
         let mut clip = |value: f32, limit: f32| {
@@ -204,7 +241,6 @@ impl GraspEnv {
             clip(action[1], MAX_PALM_STEP),
             clip(action[2], MAX_PALM_STEP),
         );
-        let shape = self.benchmark.tasks[self.task_index].topology.shape();
         for finger in 0..5 {
             let step = clip(action[3 + finger], MAX_FINGER_STEP);
             if shape[finger].active && step != 0.0 {
@@ -306,7 +342,7 @@ impl GraspEnv {
             grip: contacts.grip / limit,
             progress: judge.progress(),
             objective: Some(task.objective),
-            topology: Some(task.topology),
+            topology: Some(self.topology()),
         };
         Ok(events)
     }

@@ -165,3 +165,53 @@ fn commanded_fingers_reach_their_coupled_angles_in_free_space() {
         );
     }
 }
+
+#[test]
+fn task_subsets_and_forced_topologies_apply_from_the_next_reset() {
+    use grasp_sim::TaskChoice;
+    use grasp_sim::benchmark::Topology;
+    let mut env = env(SimConfig::default());
+    let tasks = env.benchmark().tasks.len();
+    env.set_task_choice(TaskChoice::Subset(vec![2, 5]))
+        .expect("subset");
+    let mut seen = std::collections::BTreeSet::new();
+    for seed in 0..20 {
+        env.reset_seeded(seed).expect("reset");
+        seen.insert(env.task_index());
+    }
+    assert_eq!(seen, [2, 5].into());
+    assert!(env.set_task_choice(TaskChoice::Subset(vec![])).is_err());
+    assert!(
+        env.set_task_choice(TaskChoice::Subset(vec![1, tasks]))
+            .is_err()
+    );
+
+    let one_hot = |env: &GraspEnv| -> Vec<f32> {
+        let observation = env.observation_parts().to_vec();
+        FEATURES
+            .iter()
+            .zip(observation)
+            .filter(|(name, _)| name.starts_with("topology_"))
+            .map(|(_, v)| v)
+            .collect()
+    };
+    env.reset_task(0, 1).expect("reset");
+    let assigned = env.benchmark().tasks[0].topology;
+    assert_eq!(env.topology(), assigned);
+    assert_eq!(one_hot(&env)[assigned.index()], 1.0);
+    let forced = Topology::ALL
+        .into_iter()
+        .find(|t| *t != assigned)
+        .expect("another topology");
+    env.set_topologies(Some(vec![forced; tasks]))
+        .expect("force");
+    env.reset_task(0, 1).expect("reset");
+    assert_eq!(env.topology(), forced);
+    let hot = one_hot(&env);
+    assert_eq!(hot[forced.index()], 1.0);
+    assert_eq!(hot.iter().sum::<f32>(), 1.0);
+    assert!(env.set_topologies(Some(vec![forced; 3])).is_err());
+    env.set_topologies(None).expect("back");
+    env.reset_task(0, 1).expect("reset");
+    assert_eq!(env.topology(), assigned);
+}

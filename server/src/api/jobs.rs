@@ -46,6 +46,12 @@ struct Submission {
     checkpoint_id: Option<i64>,
 }
 
+/// The tasks column: the task ids joined, or none for random tasks.
+fn label(task: &Option<String>, tasks: &[String]) -> Option<String> {
+    let list = crm_api::jobs::task_list(task, tasks);
+    (!list.is_empty()).then(|| list.join(","))
+}
+
 async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError> {
     let Value::Object(mut fields) = body else {
         return Err(ApiError::invalid("body", "expected a JSON object"));
@@ -56,12 +62,31 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
         Some(_) => return Err(ApiError::invalid("kind", "must be \"train\" or \"eval\"")),
     };
     let catalog = &state.catalog;
-    let check_task = |task: &Option<String>| match task {
-        Some(id) if catalog.task(id).is_none() => Err(ApiError::invalid(
-            "task",
-            format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
-        )),
-        _ => Ok(()),
+    let check_task = |task: &Option<String>, tasks: &[String], topology: &Option<String>| {
+        let named = task.iter().map(|t| ("task".to_string(), t));
+        let listed = tasks
+            .iter()
+            .enumerate()
+            .map(|(k, t)| (format!("tasks[{k}]"), t));
+        for (field, id) in named.chain(listed) {
+            if catalog.task(id).is_none() {
+                return Err(ApiError::invalid(
+                    field,
+                    format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
+                ));
+            }
+        }
+        match topology.as_deref() {
+            None | Some("task") | Some("auto") => Ok(()),
+            Some(name) if catalog.topologies.iter().any(|t| t == name) => Ok(()),
+            Some(name) => Err(ApiError::invalid(
+                "topology",
+                format!(
+                    "unknown topology {name:?}: \"task\", \"auto\" or one of {}",
+                    catalog.topologies.join(", ")
+                ),
+            )),
+        }
     };
     match kind.as_str() {
         "train" => {
@@ -84,14 +109,14 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
                     format!("must be between 1 and {MAX_ENVS}"),
                 ));
             }
-            check_task(&spec.task)?;
+            check_task(&spec.task, &spec.tasks, &spec.topology)?;
             spec.config
                 .validate()
                 .map_err(|e| ApiError::invalid(format!("config.{}", e.field), e.message))?;
             Ok(Submission {
                 kind: "train",
                 algorithm: spec.algorithm.name().to_string(),
-                task: spec.task.clone(),
+                task: label(&spec.task, &spec.tasks),
                 spec: serde_json::to_string(&spec).map_err(ApiError::internal)?,
                 checkpoint_id: None,
             })
@@ -110,14 +135,14 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
                     format!("must be between 1 and {MAX_EPISODES}"),
                 ));
             }
-            check_task(&spec.task)?;
+            check_task(&spec.task, &spec.tasks, &spec.topology)?;
             let checkpoint = state.store.checkpoint(checkpoint_id).await.map_err(|_| {
                 ApiError::invalid("checkpoint_id", format!("no checkpoint {checkpoint_id}"))
             })?;
             Ok(Submission {
                 kind: "eval",
                 algorithm: checkpoint.algorithm,
-                task: spec.task.clone(),
+                task: label(&spec.task, &spec.tasks),
                 spec: serde_json::to_string(&spec).map_err(ApiError::internal)?,
                 checkpoint_id: Some(checkpoint_id),
             })

@@ -18,9 +18,13 @@ pub struct EvalArgs {
     pub episodes: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Evaluate on one task (id) instead of random tasks.
+    /// Evaluate on this task (id; repeat for several) instead of random tasks.
     #[arg(long)]
-    pub task: Option<String>,
+    pub task: Vec<String>,
+    /// Grasp topology: `task` (each task's assigned one), `auto` (the selection network's
+    /// pick) or a topology name forced on every task.
+    #[arg(long)]
+    pub topology: Option<String>,
     #[arg(long)]
     pub json: bool,
 }
@@ -29,7 +33,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let spec = EvalSpec {
         episodes: args.episodes,
         seed: args.seed,
-        task: args.task.clone(),
+        task: None,
+        tasks: args.task.clone(),
+        topology: args.topology.clone(),
     };
     let report = evaluate(&args.checkpoint, &spec, &args.env, |_, _, _| true)?;
     if args.json {

@@ -95,6 +95,49 @@ fn labels(benchmark: &Benchmark) -> BTreeMap<(String, Objective), BTreeSet<Topol
     pairs
 }
 
+/// The shipped selection network (`models/topology.safetensors`, made by
+/// `crm topology train --seed 0`), compiled in so every worker has it.
+const SHIPPED: &[u8] = include_bytes!("../../../models/topology.safetensors");
+
+/// The network's highest-probability topology for every task of the benchmark (its object
+/// and objective), from `model` or the shipped network.
+pub fn picks(
+    benchmark: &Benchmark,
+    model: Option<&std::path::Path>,
+) -> anyhow::Result<Vec<Topology>> {
+    let (net, inputs, outputs) = match model {
+        Some(path) => TopologyNet::load(path)?,
+        None => {
+            TopologyNet::from_bytes(SHIPPED, std::path::Path::new("models/topology.safetensors"))?
+        }
+    };
+    if inputs != input_names() {
+        anyhow::bail!("the topology network was trained on other inputs");
+    }
+    let rows: Vec<Vec<f32>> = benchmark
+        .tasks
+        .iter()
+        .map(|task| {
+            let object = benchmark.object_of(task);
+            input(object, task.objective, None)
+        })
+        .collect();
+    net.predict(&rows)?
+        .iter()
+        .map(|p| {
+            let best = p
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(b.1))
+                .map_or(0, |(k, _)| k);
+            outputs
+                .get(best)
+                .and_then(|name| Topology::from_name(name))
+                .context("the topology network names an unknown topology")
+        })
+        .collect()
+}
+
 pub fn run(command: TopologyCommand) -> anyhow::Result<()> {
     match command {
         TopologyCommand::Train(args) => train(args),
@@ -190,4 +233,29 @@ fn predict(args: PredictArgs) -> anyhow::Result<()> {
             serde_json::to_string_pretty(&report)?
         }
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shipped_network_picks_the_assigned_topology_for_most_tasks() {
+        let benchmark = Benchmark::builtin();
+        let picks = picks(&benchmark, None).expect("picks");
+        assert_eq!(picks.len(), benchmark.tasks.len());
+        // Where an (object, objective) pair has several assigned topologies, any is right.
+        let labels = labels(&benchmark);
+        let right = benchmark
+            .tasks
+            .iter()
+            .zip(&picks)
+            .filter(|(task, pick)| labels[&(task.object.clone(), task.objective)].contains(pick))
+            .count();
+        assert!(
+            right * 10 >= benchmark.tasks.len() * 9,
+            "{right} of {}",
+            benchmark.tasks.len()
+        );
+    }
 }

@@ -26,9 +26,13 @@ pub struct TrainArgs {
     /// Directory for the checkpoint and metrics (created if missing).
     #[arg(long)]
     pub out: PathBuf,
-    /// Train on one task (id) instead of random tasks.
+    /// Train on this task (id; repeat for several) instead of random tasks.
     #[arg(long)]
-    pub task: Option<String>,
+    pub task: Vec<String>,
+    /// Grasp topology: `task` (each task's assigned one), `auto` (the selection network's
+    /// pick) or a topology name forced on every task.
+    #[arg(long)]
+    pub topology: Option<String>,
     /// Environments stepped in parallel (default: one per core). Results depend on this
     /// number and the seed, not on the thread count.
     #[arg(long)]
@@ -66,7 +70,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         algorithm: args.algo,
         steps: args.steps as u64,
         seed: args.seed,
-        task: args.task.clone(),
+        task: None,
+        tasks: args.task.clone(),
+        topology: args.topology.clone(),
         envs: args.envs,
         config,
     };

@@ -82,10 +82,7 @@ pub fn evaluate(
         trained_steps,
     } = LoadedPolicy::load(path, env)?;
     let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
-    if let Some(id) = &spec.task {
-        let index = crate::commands::task_index(&benchmark, id)?;
-        grasp.set_task_choice(grasp_sim::TaskChoice::Fixed(index))?;
-    }
+    super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?.apply(&mut grasp)?;
     let mut crm_env = crm::CrmEnv::new(machine, grasp, crm::RewardMode::Crm);
     let mut sums: BTreeMap<Objective, (u64, u64, u64)> = BTreeMap::new();
     for k in 0..spec.episodes {

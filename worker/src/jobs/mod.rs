@@ -6,6 +6,8 @@ pub mod eval;
 pub mod train;
 
 use crm_api::Algorithm;
+use grasp_sim::benchmark::Topology;
+use grasp_sim::{Benchmark, GraspEnv, TaskChoice};
 
 /// The reward mode each algorithm learns from (paper, section V-A).
 pub fn reward_mode(algorithm: Algorithm) -> crm::RewardMode {
@@ -13,5 +15,53 @@ pub fn reward_mode(algorithm: Algorithm) -> crm::RewardMode {
         Algorithm::Ippo => crm::RewardMode::Sparse,
         Algorithm::Lppo => crm::RewardMode::Dense,
         _ => crm::RewardMode::Crm,
+    }
+}
+
+/// Which tasks and topologies a job's environments use.
+#[derive(Clone, Debug)]
+pub struct EnvChoice {
+    pub tasks: TaskChoice,
+    pub topologies: Option<Vec<Topology>>,
+}
+
+impl EnvChoice {
+    /// From a job's `task`/`tasks` and `topology` (`task`, `auto` or a topology name).
+    pub fn of(
+        benchmark: &Benchmark,
+        task: &Option<String>,
+        tasks: &[String],
+        topology: &Option<String>,
+    ) -> anyhow::Result<Self> {
+        let indices = crm_api::jobs::task_list(task, tasks)
+            .iter()
+            .map(|id| crate::commands::task_index(benchmark, id))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let tasks = match indices.as_slice() {
+            [] => TaskChoice::Random,
+            [one] => TaskChoice::Fixed(*one),
+            _ => TaskChoice::Subset(indices),
+        };
+        let topologies = match topology.as_deref() {
+            None | Some("task") => None,
+            Some("auto") => Some(crate::commands::topology::picks(benchmark, None)?),
+            Some(name) => {
+                let forced = Topology::from_name(name).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "topology: unknown topology {name:?} (task, auto, or one of {})",
+                        Topology::ALL.map(Topology::name).join(", ")
+                    )
+                })?;
+                Some(vec![forced; benchmark.tasks.len()])
+            }
+        };
+        Ok(Self { tasks, topologies })
+    }
+
+    /// Applies the choice to an environment.
+    pub fn apply(&self, env: &mut GraspEnv) -> anyhow::Result<()> {
+        env.set_task_choice(self.tasks.clone())?;
+        env.set_topologies(self.topologies.clone())?;
+        Ok(())
     }
 }

@@ -12,7 +12,7 @@ use anyhow::{Context, bail};
 use crm_api::{Algorithm, Iteration, TrainSpec};
 use crm_learn::checkpoint::FORMAT;
 use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, VecEnv};
-use grasp_sim::{GraspEnv, TaskChoice};
+use grasp_sim::GraspEnv;
 
 use crate::commands::EnvArgs;
 
@@ -51,10 +51,7 @@ impl Trainer {
             Algorithm::Ppo => env.machine_or(grasp_sim::spec::flat_spec())?,
             _ => env.machine()?,
         };
-        let choice = match &spec.task {
-            Some(id) => TaskChoice::Fixed(crate::commands::task_index(&benchmark, id)?),
-            None => TaskChoice::Random,
-        };
+        let choice = super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
         let env_count = spec.envs.unwrap_or_else(rayon::current_num_threads);
         if env_count == 0 {
             bail!("envs must be at least 1");
@@ -90,7 +87,7 @@ impl Trainer {
         let envs = (0..env_count)
             .map(|_| {
                 let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
-                grasp.set_task_choice(choice)?;
+                choice.apply(&mut grasp)?;
                 Ok(crm::CrmEnv::new(
                     machine.clone(),
                     grasp,
