@@ -170,7 +170,10 @@ impl Store {
         let count: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM workers")
             .fetch_one(&self.pool)
             .await?;
-        let id = format!("w{}-{:x}", count + 1, now & 0xFFFF_FFFF);
+        // Unique within this coordinator even for registrations in the same millisecond.
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let serial = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let id = format!("w{}-{:x}{serial:x}", count + 1, now & 0xFFFF_FFFF);
         sqlx::query("INSERT INTO workers (id, name, cores, version, registered_at, last_heartbeat) VALUES (?, ?, ?, ?, ?, ?)")
             .bind(&id).bind(name).bind(cores).bind(version).bind(now).bind(now)
             .execute(&self.pool)

@@ -192,7 +192,11 @@ fn train(
             return Ok(None);
         }
         let it = trainer.iterate()?;
-        link.send(progress::Body::IterationJson(serde_json::to_string(&it)?))?;
+        let sent = link.send(progress::Body::IterationJson(serde_json::to_string(&it)?));
+        if sent.is_err() && link.stopped() {
+            return Ok(None);
+        }
+        sent?;
         if last_upload.elapsed() >= every {
             upload(&trainer)?;
             last_upload = Instant::now();

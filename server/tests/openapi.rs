@@ -1,0 +1,42 @@
+//! The OpenAPI document covers every REST route, and the `crm-server` binary starts. (Being an
+//! integration test of this package also makes `cargo test --workspace` build the binary
+//! that the end-to-end tests in `tests/` start.)
+
+#[test]
+fn every_route_is_in_the_openapi_document() {
+    let doc: serde_json::Value =
+        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
+    let paths = doc["paths"].as_object().expect("paths");
+    let source = include_str!("../src/api/mod.rs");
+    let mut routes = Vec::new();
+    for piece in source.split(".route(\"").skip(1) {
+        let route = piece.split('"').next().expect("route");
+        let full = if route == "/healthz" {
+            route.to_string()
+        } else {
+            format!("/api/v1{route}")
+        };
+        routes.push(full);
+    }
+    assert!(routes.len() >= 15, "{routes:?}");
+    for route in &routes {
+        assert!(paths.contains_key(route), "{route} is not in openapi.json");
+    }
+    for path in paths.keys() {
+        assert!(
+            routes.contains(path),
+            "openapi.json documents {path}, no such route"
+        );
+    }
+}
+
+#[test]
+fn the_binary_refuses_bad_settings_with_exit_code_2() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_crm-server"))
+        .args(["--lease-ttl-s", "1", "--heartbeat-interval-s", "5"])
+        .output()
+        .expect("run crm-server");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("lease_ttl_s"), "{stderr}");
+}
