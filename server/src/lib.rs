@@ -43,11 +43,20 @@ pub struct Running {
 }
 
 impl Running {
-    /// Stops serving and closes the store.
+    /// Stops serving and closes the store. Requests in flight get a few seconds; a worker's
+    /// open progress stream does not hold the shutdown (its job is re-queued when the lease
+    /// expires, as if the worker had died).
     pub async fn stop(self) -> anyhow::Result<()> {
         self.shutdown.notify_waiters();
         for task in self.tasks {
-            task.await??;
+            let abort = task.abort_handle();
+            match tokio::time::timeout(std::time::Duration::from_secs(3), task).await {
+                Ok(joined) => joined??,
+                Err(_) => {
+                    abort.abort();
+                    tracing::warn!("open streams cut at shutdown");
+                }
+            }
         }
         self.state.store.close().await;
         Ok(())

@@ -109,13 +109,18 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
 pub fn worker_main(options: WorkerOptions) -> anyhow::Result<()> {
     crm_server::init_logging();
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    runtime.block_on(async move {
+    let result = runtime.block_on(async move {
         let stop = Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        tokio::spawn(async move {
-            tokio::signal::ctrl_c().await.ok();
-            flag.store(true, Ordering::Relaxed);
-        });
-        run_worker(options, stop).await
-    })
+        tokio::select! {
+            result = run_worker(options, stop.clone()) => result,
+            _ = tokio::signal::ctrl_c() => {
+                stop.store(true, Ordering::Relaxed);
+                tracing::info!("stopping; a running job is re-queued when its lease expires");
+                Ok(())
+            }
+        }
+    });
+    // Do not wait for a job's blocking thread (see `up_main`).
+    runtime.shutdown_timeout(Duration::from_secs(2));
+    result
 }

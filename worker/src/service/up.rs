@@ -13,11 +13,10 @@ use super::{WorkerOptions, run_worker};
 pub fn up_main(config: ServerConfig, workers: usize, options: WorkerOptions) -> anyhow::Result<()> {
     crm_server::init_logging();
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    runtime.block_on(async move {
+    let result = runtime.block_on(async move {
         let running = crm_server::start(config).await?;
         let token = running.state.config.token.clone();
         println!("crm-grasp is up");
-        println!("  dashboard  http://{}/", running.http_addr);
         println!(
             "  REST API   http://{}/api/v1  (OpenAPI: /api/v1/openapi.json)",
             running.http_addr
@@ -48,5 +47,9 @@ pub fn up_main(config: ServerConfig, workers: usize, options: WorkerOptions) -> 
             handle.abort();
         }
         running.stop().await
-    })
+    });
+    // A job still learning on a blocking thread is not waited for: its lease runs out and
+    // the coordinator re-queues it, to be resumed from its last checkpoint.
+    runtime.shutdown_timeout(std::time::Duration::from_secs(2));
+    result
 }
