@@ -105,8 +105,8 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
             "algorithm",
         ),
         (
-            r#"{"kind": "train", "algorithm": "crm-sac", "steps": 10}"#,
-            "algorithm",
+            r#"{"kind": "train", "algorithm": "crm-sac", "steps": 10, "sac": {"tau": 2}}"#,
+            "sac.tau",
         ),
         (
             r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "task": "nope"}"#,

@@ -143,9 +143,74 @@ fn train_writes_a_checkpoint_that_eval_reads_and_refuses_bad_input() {
     ]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("\"algorithm\":\"ppo\""), "{stdout}");
-    let (code, _, stderr) = crm(&["train", "--algo", "crm-sac", "--steps", "10", "--out", out]);
+    // CRM-SAC: a short run with small settings, evaluated, resumed; a bad setting refused.
+    let sac = dir.join("sac");
+    let sac_dir = sac.to_str().expect("path");
+    let config = dir.join("sac.json");
+    std::fs::write(
+        &config,
+        r#"{"learning_starts": 64, "batch_size": 32, "rollout_steps": 64, "hidden": [32]}"#,
+    )
+    .expect("write");
+    let config = config.to_str().expect("path");
+    let sac_args = ["--algo", "crm-sac", "--task", "mouse-press", "--envs", "1"];
+    let (code, _, stderr) = crm(&[
+        &[
+            "train", "--steps", "128", "--config", config, "--out", sac_dir,
+        ][..],
+        &sac_args,
+    ]
+    .concat());
+    assert_eq!(code, 0, "{stderr}");
+    let sac_checkpoint = sac.join("crm-sac.safetensors");
+    let (code, stdout, stderr) = crm(&[
+        "eval",
+        "--checkpoint",
+        sac_checkpoint.to_str().expect("path"),
+        "--episodes",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("\"algorithm\":\"crm-sac\""), "{stdout}");
+    let resume = sac_checkpoint.to_str().expect("path");
+    let (code, _, stderr) = crm(&[
+        &[
+            "train", "--steps", "192", "--config", config, "--resume", resume, "--out", sac_dir,
+        ][..],
+        &sac_args,
+    ]
+    .concat());
+    assert_eq!(code, 0, "{stderr}");
+    let metrics = std::fs::read_to_string(sac.join("metrics.jsonl")).expect("metrics");
+    let last: serde_json::Value =
+        serde_json::from_str(metrics.lines().last().expect("a line")).expect("json");
+    assert_eq!(last["steps"], 192, "resumed at 128 and trained to 192");
+    let (code, _, stderr) = crm(&[
+        "train", "--algo", "lppo", "--steps", "300", "--resume", resume, "--out", sac_dir,
+    ]);
     assert_eq!(code, 2);
-    assert!(stderr.contains("not available yet"), "{stderr}");
+    assert!(
+        stderr.contains("trained with crm-sac, not lppo"),
+        "{stderr}"
+    );
+    let bad = dir.join("bad-sac.json");
+    std::fs::write(&bad, r#"{"tau": 2.0}"#).expect("write");
+    let (code, _, stderr) = crm(&[
+        &[
+            "train",
+            "--steps",
+            "64",
+            "--config",
+            bad.to_str().expect("path"),
+            "--out",
+            sac_dir,
+        ][..],
+        &sac_args,
+    ]
+    .concat());
+    assert_eq!(code, 2);
+    assert!(stderr.contains("tau"), "{stderr}");
     let junk = dir.join("junk.safetensors");
     std::fs::write(&junk, b"not a checkpoint").expect("write");
     let (code, _, stderr) = crm(&["eval", "--checkpoint", junk.to_str().expect("path")]);

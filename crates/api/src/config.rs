@@ -125,6 +125,100 @@ impl PpoConfig {
     }
 }
 
+/// Knobs of SAC inside the CRM (the paper's CRM-SAC baseline, section V-A). The paper gives
+/// no SAC settings; defaults are stable-baselines3's, which the authors' code used, except
+/// where noted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SacConfig {
+    /// Adam learning rate of the actor, the critics and the temperature. sb3: 3e-4.
+    pub learning_rate: f64,
+    /// Discount. Paper V-B-2 (as for PPO): 0.99.
+    pub gamma: f32,
+    /// Polyak factor of the target critics. sb3: 0.005.
+    pub tau: f32,
+    /// Minibatch size. sb3: 256.
+    pub batch_size: usize,
+    /// Replay buffer capacity in transitions. sb3: 1,000,000.
+    pub buffer_size: usize,
+    /// Uniformly random actions for this many steps before learning. sb3: 100; 1,000 here, as
+    /// the grasping episodes are long.
+    pub learning_starts: usize,
+    /// Gradient steps per environment step. sb3: 1.
+    pub updates_per_step: f32,
+    /// Environment steps per iteration (between progress reports).
+    pub rollout_steps: usize,
+    /// Hidden layer widths of the actor and each critic. sb3: [256, 256].
+    pub hidden: Vec<usize>,
+    /// Target entropy per live action dimension (automatic temperature tuning). sb3: -1.
+    pub target_entropy_per_dim: f32,
+    /// Early stop as for PPO. Paper V-B-2: 99% over the most recent 100 episodes.
+    pub early_stop_success: f32,
+    pub early_stop_window: usize,
+}
+
+impl Default for SacConfig {
+    fn default() -> Self {
+        Self {
+            learning_rate: 3e-4,
+            gamma: 0.99,
+            tau: 0.005,
+            batch_size: 256,
+            buffer_size: 1_000_000,
+            learning_starts: 1_000,
+            updates_per_step: 1.0,
+            rollout_steps: 1_024,
+            hidden: vec![256, 256],
+            target_entropy_per_dim: -1.0,
+            early_stop_success: 0.99,
+            early_stop_window: 100,
+        }
+    }
+}
+
+impl SacConfig {
+    /// Refuses values out of their domain, naming the field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |field: &'static str, message: &str| {
+            Err(ConfigError {
+                field,
+                message: message.to_string(),
+            })
+        };
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return bad("learning_rate", "must be positive");
+        }
+        if !(0.0..=1.0).contains(&self.gamma) {
+            return bad("gamma", "must be in [0, 1]");
+        }
+        if !(self.tau > 0.0 && self.tau <= 1.0) {
+            return bad("tau", "must be in (0, 1]");
+        }
+        if self.batch_size == 0 || self.buffer_size < self.batch_size {
+            return bad("batch_size", "must be at least 1 and at most buffer_size");
+        }
+        if !(self.updates_per_step.is_finite() && self.updates_per_step > 0.0) {
+            return bad("updates_per_step", "must be positive");
+        }
+        if self.rollout_steps == 0 {
+            return bad("rollout_steps", "must be at least 1");
+        }
+        if self.hidden.is_empty() || self.hidden.contains(&0) {
+            return bad("hidden", "needs at least one layer and no zero width");
+        }
+        if !self.target_entropy_per_dim.is_finite() {
+            return bad("target_entropy_per_dim", "must be finite");
+        }
+        if !(0.0..=1.0).contains(&self.early_stop_success) || self.early_stop_window == 0 {
+            return bad(
+                "early_stop_success",
+                "must be in [0, 1] with a window of at least 1",
+            );
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::PpoConfig;
+use crate::config::{PpoConfig, SacConfig};
 
 /// The learners by name.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -17,7 +17,7 @@ pub enum Algorithm {
     Ippo,
     /// PPO with the hierarchical dense intra-stage rewards only.
     Lppo,
-    /// SAC inside the CRM (not available yet).
+    /// SAC inside the CRM with the CRM's reward (the paper's CRM-SAC baseline).
     CrmSac,
     /// PPO on the flat, unstaged machine (`crates/sim/specs/flat.json`): the ablation.
     Ppo,
@@ -45,11 +45,6 @@ impl Algorithm {
     /// The algorithm named `name`, as in checkpoints and the API.
     pub fn parse(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|a| a.name() == name)
-    }
-
-    /// Whether this build can train it.
-    pub fn available(self) -> bool {
-        self != Algorithm::CrmSac
     }
 }
 
@@ -82,9 +77,16 @@ pub struct TrainSpec {
     /// depend on this number and the seed, not on the thread count.
     #[serde(default)]
     pub envs: Option<usize>,
-    /// PPO settings; defaults cite the paper.
+    /// PPO settings (crm-ppo, ippo, lppo, ppo); defaults cite the paper.
     #[serde(default)]
     pub config: PpoConfig,
+    /// SAC settings (crm-sac).
+    #[serde(default, skip_serializing_if = "is_default_sac")]
+    pub sac: SacConfig,
+}
+
+fn is_default_sac(config: &SacConfig) -> bool {
+    *config == SacConfig::default()
 }
 
 /// An evaluation job's parameters (the checkpoint is given beside them).

@@ -9,5 +9,5 @@ pub mod config;
 pub mod jobs;
 
 pub use catalog::Catalog;
-pub use config::{ConfigError, PpoConfig};
+pub use config::{ConfigError, PpoConfig, SacConfig};
 pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, Row, TrainSpec};

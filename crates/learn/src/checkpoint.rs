@@ -47,11 +47,19 @@ fn refuse(path: &Path, message: impl Into<String>) -> Error {
 impl Checkpoint {
     /// Writes the networks and the header to `path`.
     pub fn save(net: &ActorCritic, header: &CheckpointHeader, path: &Path) -> Result<()> {
+        Self::save_params(net.params(), header, path)
+    }
+
+    /// Writes named parameters (any learner's) and the header to `path`.
+    pub fn save_params(
+        params: &[(String, candle_core::Var)],
+        header: &CheckpointHeader,
+        path: &Path,
+    ) -> Result<()> {
         let json = serde_json::to_string(header)
             .map_err(|e| refuse(path, format!("cannot encode header: {e}")))?;
         let metadata = HashMap::from([(HEADER_KEY.to_string(), json)]);
-        let tensors: Vec<(&str, &candle_core::Tensor)> = net
-            .params()
+        let tensors: Vec<(&str, &candle_core::Tensor)> = params
             .iter()
             .map(|(name, var)| (name.as_str(), var.as_tensor()))
             .collect();
@@ -84,12 +92,12 @@ impl Checkpoint {
         Ok(header)
     }
 
-    /// Loads a checkpoint made for this machine (`spec_hash`) and environment version.
-    pub fn load(
+    /// Reads a checkpoint's bytes and header, refusing another machine or environment.
+    fn read_checked(
         path: &Path,
         spec_hash: &str,
         env_version: &str,
-    ) -> Result<(ActorCritic, CheckpointHeader)> {
+    ) -> Result<(Vec<u8>, CheckpointHeader)> {
         let bytes = std::fs::read(path).map_err(|e| refuse(path, format!("cannot read: {e}")))?;
         let header = Self::header_of(&bytes, path)?;
         if header.spec_hash != spec_hash {
@@ -110,10 +118,14 @@ impl Checkpoint {
                 ),
             ));
         }
-        let net = ActorCritic::new(header.layout, &header.hidden, 0)?;
-        let tensors = candle_core::safetensors::load_buffer(&bytes, net.device())
+        Ok((bytes, header))
+    }
+
+    /// Sets every parameter from the checkpoint's tensor of the same name and shape.
+    fn fill(bytes: &[u8], path: &Path, params: &[(String, candle_core::Var)]) -> Result<()> {
+        let tensors = candle_core::safetensors::load_buffer(bytes, &candle_core::Device::Cpu)
             .map_err(|e| refuse(path, format!("cannot read tensors: {e}")))?;
-        for (name, var) in net.params() {
+        for (name, var) in params {
             let tensor = tensors
                 .get(name)
                 .ok_or_else(|| refuse(path, format!("missing tensor {name}")))?;
@@ -129,7 +141,41 @@ impl Checkpoint {
             }
             var.set(tensor)?;
         }
+        Ok(())
+    }
+
+    /// Loads a PPO-family checkpoint made for this machine (`spec_hash`) and environment
+    /// version.
+    pub fn load(
+        path: &Path,
+        spec_hash: &str,
+        env_version: &str,
+    ) -> Result<(ActorCritic, CheckpointHeader)> {
+        let (bytes, header) = Self::read_checked(path, spec_hash, env_version)?;
+        if header.algorithm == "crm-sac" {
+            return Err(refuse(path, "a crm-sac checkpoint: load it with load_sac"));
+        }
+        let net = ActorCritic::new(header.layout, &header.hidden, 0)?;
+        Self::fill(&bytes, path, net.params())?;
         Ok((net, header))
+    }
+
+    /// Loads a CRM-SAC checkpoint made for this machine and environment version.
+    pub fn load_sac(
+        path: &Path,
+        spec_hash: &str,
+        env_version: &str,
+    ) -> Result<(crate::sac::SacNets, CheckpointHeader)> {
+        let (bytes, header) = Self::read_checked(path, spec_hash, env_version)?;
+        if header.algorithm != "crm-sac" {
+            return Err(refuse(
+                path,
+                format!("a {} checkpoint, not crm-sac", header.algorithm),
+            ));
+        }
+        let nets = crate::sac::SacNets::new(header.layout, &header.hidden, 0)?;
+        Self::fill(&bytes, path, &nets.params)?;
+        Ok((nets, header))
     }
 }
 

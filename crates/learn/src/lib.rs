@@ -12,6 +12,7 @@ pub mod network;
 pub mod noise;
 pub mod ppo;
 pub mod rollout;
+pub mod sac;
 pub mod topology;
 
 pub use checkpoint::{Checkpoint, CheckpointHeader};
@@ -21,5 +22,6 @@ pub use error::{Error, Result};
 pub use network::{ActorCritic, Layout};
 pub use noise::Noise;
 pub use ppo::{Ppo, UpdateStats};
-pub use rollout::{Rollout, VecEnv};
+pub use rollout::{Actor, Rollout, VecEnv};
+pub use sac::{Sac, SacNets, SacStats};
 pub use topology::{Example, TopologyNet};

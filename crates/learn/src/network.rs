@@ -54,7 +54,7 @@ pub struct ActorCritic {
     params: Vec<(String, Var)>,
 }
 
-fn layer(
+pub(crate) fn layer(
     noise: &mut Noise,
     device: &Device,
     name: &str,
@@ -77,7 +77,7 @@ fn layer(
     Ok(linear)
 }
 
-fn mlp(
+pub(crate) fn mlp(
     noise: &mut Noise,
     device: &Device,
     prefix: &str,
@@ -104,7 +104,7 @@ fn mlp(
         .collect()
 }
 
-fn run(layers: &[Linear], input: &Tensor) -> Result<Tensor> {
+pub(crate) fn run(layers: &[Linear], input: &Tensor) -> Result<Tensor> {
     let mut x = input.clone();
     for (k, layer) in layers.iter().enumerate() {
         x = layer.forward(&x)?;
@@ -113,6 +113,44 @@ fn run(layers: &[Linear], input: &Tensor) -> Result<Tensor> {
         }
     }
     Ok(x)
+}
+
+/// The network input `[phi_i(u) zero-padded to state_width, one-hot(stage)]` for a batch.
+pub fn encode(
+    layout: Layout,
+    states: &[Vec<f32>],
+    stages: &[usize],
+    device: &Device,
+) -> Result<Tensor> {
+    if states.len() != stages.len() {
+        return Err(Error::Length {
+            what: "stages",
+            expected: states.len(),
+            got: stages.len(),
+        });
+    }
+    let width = layout.input_width();
+    let mut data = vec![0.0f32; states.len() * width];
+    for (row, (state, &stage)) in states.iter().zip(stages).enumerate() {
+        if state.len() > layout.state_width {
+            return Err(Error::Length {
+                what: "abstract state",
+                expected: layout.state_width,
+                got: state.len(),
+            });
+        }
+        if stage >= layout.stages {
+            return Err(Error::Length {
+                what: "stage index",
+                expected: layout.stages,
+                got: stage,
+            });
+        }
+        let base = row * width;
+        data[base..base + state.len()].copy_from_slice(state);
+        data[base + layout.state_width + stage] = 1.0;
+    }
+    Ok(Tensor::from_vec(data, (states.len(), width), device)?)
 }
 
 impl std::fmt::Debug for ActorCritic {
@@ -171,35 +209,7 @@ impl ActorCritic {
     /// Builds the network input from abstract states (each at most `state_width` long) and
     /// their stages.
     pub fn input(&self, states: &[Vec<f32>], stages: &[usize]) -> Result<Tensor> {
-        if states.len() != stages.len() {
-            return Err(Error::Length {
-                what: "stages",
-                expected: states.len(),
-                got: stages.len(),
-            });
-        }
-        let width = self.layout.input_width();
-        let mut data = vec![0.0f32; states.len() * width];
-        for (row, (state, &stage)) in states.iter().zip(stages).enumerate() {
-            if state.len() > self.layout.state_width {
-                return Err(Error::Length {
-                    what: "abstract state",
-                    expected: self.layout.state_width,
-                    got: state.len(),
-                });
-            }
-            if stage >= self.layout.stages {
-                return Err(Error::Length {
-                    what: "stage index",
-                    expected: self.layout.stages,
-                    got: stage,
-                });
-            }
-            let base = row * width;
-            data[base..base + state.len()].copy_from_slice(state);
-            data[base + self.layout.state_width + stage] = 1.0;
-        }
-        Ok(Tensor::from_vec(data, (states.len(), width), &self.device)?)
+        encode(self.layout, states, stages, &self.device)
     }
 
     /// Policy means `[batch, actions]`.

@@ -67,6 +67,31 @@ struct Slot<E> {
     buffer: Rollout,
 }
 
+/// A policy the rollouts can ask for actions (PPO's and SAC's).
+pub trait Actor {
+    /// Union-space actions (and their log-probabilities, where the learner needs them) for a
+    /// batch of abstract states; noise drawn row by row in order.
+    fn act_batch(
+        &mut self,
+        states: &[Vec<f32>],
+        stages: &[usize],
+        masks: &[Vec<f32>],
+        deterministic: bool,
+    ) -> Result<(Vec<Vec<f32>>, Vec<f32>)>;
+}
+
+impl Actor for Ppo {
+    fn act_batch(
+        &mut self,
+        states: &[Vec<f32>],
+        stages: &[usize],
+        masks: &[Vec<f32>],
+        deterministic: bool,
+    ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
+        Ppo::act_batch(self, states, stages, masks, deterministic)
+    }
+}
+
 /// Environments stepped together.
 pub struct VecEnv<E> {
     slots: Vec<Slot<E>>,
@@ -123,7 +148,7 @@ impl<E: crm::Environment + Send> VecEnv<E> {
     }
 
     /// Steps every environment `steps_per_env` times with the policy of `ppo`.
-    pub fn collect(&mut self, ppo: &mut Ppo, steps_per_env: usize) -> Result<Rollout> {
+    pub fn collect<A: Actor>(&mut self, ppo: &mut A, steps_per_env: usize) -> Result<Rollout> {
         let base_seed = self.base_seed;
         for _ in 0..steps_per_env {
             let states: Vec<Vec<f32>> = self.slots.iter().map(|s| s.state.clone()).collect();

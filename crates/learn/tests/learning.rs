@@ -2,7 +2,8 @@
 //! beats the untrained one. The task is a one-dimensional reach through a two-stage machine,
 //! so the test runs in a second and exercises the learner end to end through `crm::CrmEnv`.
 
-use crm_learn::{Layout, Ppo, PpoConfig, VecEnv};
+use crm_api::SacConfig;
+use crm_learn::{Actor, Layout, Ppo, PpoConfig, Sac, VecEnv};
 
 const SPEC: &str = r#"{
   "name": "reach",
@@ -58,14 +59,17 @@ fn env() -> crm::CrmEnv<Reach> {
     crm::CrmEnv::new(machine, Reach { x: 0.0, steps: 0 }, crm::RewardMode::Crm)
 }
 
-fn success_rate(ppo: &mut Ppo, episodes: u64) -> f64 {
+fn success_rate(ppo: &mut impl Actor, episodes: u64) -> f64 {
     let mut env = env();
     let mut wins = 0;
     for seed in 0..episodes {
         let (mut stage, mut state) = env.reset(10_000 + seed).expect("reset");
         loop {
             let mask = env.machine().action_mask(stage);
-            let (action, _) = ppo.act(&state, stage, &mask, true).expect("act");
+            let (mut actions, _) = ppo
+                .act_batch(&[state.clone()], &[stage], &[mask], true)
+                .expect("act");
+            let action = actions.pop().expect("one action");
             let step = env.step(&action).expect("step");
             if step.done {
                 wins += 1;
@@ -146,4 +150,37 @@ fn rollouts_and_updates_are_bitwise_reproducible_across_thread_counts() {
     let one = run(1);
     assert_eq!(one, run(3));
     assert_eq!(one, run(1));
+}
+
+#[test]
+fn a_short_seeded_sac_run_on_an_easy_task_beats_the_untrained_policy() {
+    let machine = env().machine().clone();
+    let layout = Layout::of(&machine);
+    let masks = (0..machine.stage_count())
+        .map(|s| machine.action_mask(s))
+        .collect();
+    let config = SacConfig {
+        batch_size: 64,
+        learning_starts: 256,
+        hidden: vec![32, 32],
+        learning_rate: 1e-3,
+        ..SacConfig::default()
+    };
+    let mut sac = Sac::new(layout, config, masks, 2).expect("sac");
+    let before = success_rate(&mut sac, 20);
+    let mut envs = VecEnv::new((0..4).map(|_| env()).collect(), 2).expect("envs");
+    for _ in 0..12 {
+        let rollout = envs.collect(&mut sac, 32).expect("rollout");
+        sac.store(&rollout);
+        let stats = sac.update(rollout.len()).expect("update");
+        assert!(stats.critic_loss.is_finite() && stats.actor_loss.is_finite());
+        assert!(stats.alpha > 0.0);
+    }
+    assert_eq!(sac.seen(), 12 * 128);
+    let after = success_rate(&mut sac, 20);
+    eprintln!("SAC success rate before training {before}, after {after}");
+    assert!(
+        after >= before + 0.5,
+        "success before {before}, after {after}"
+    );
 }

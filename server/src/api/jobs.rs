@@ -91,12 +91,9 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
     match kind.as_str() {
         "train" => {
             let spec: TrainSpec = decode(Value::Object(fields), "")?;
-            if !spec.algorithm.available() {
-                return Err(ApiError::invalid(
-                    "algorithm",
-                    format!("{} is not available in this build", spec.algorithm.name()),
-                ));
-            }
+            spec.sac
+                .validate()
+                .map_err(|e| ApiError::invalid(format!("sac.{}", e.field), e.message))?;
             if spec.steps == 0 || spec.steps > MAX_STEPS {
                 return Err(ApiError::invalid(
                     "steps",

@@ -10,7 +10,7 @@ use crm_learn::PpoConfig;
 
 use super::EnvArgs;
 use crate::jobs::train::Trainer;
-use crm_api::{Algorithm, TrainSpec};
+use crm_api::{Algorithm, SacConfig, TrainSpec};
 
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
@@ -37,7 +37,8 @@ pub struct TrainArgs {
     /// number and the seed, not on the thread count.
     #[arg(long)]
     pub envs: Option<usize>,
-    /// A JSON file with PPO settings (see `crm_learn::PpoConfig`); defaults cite the paper.
+    /// A JSON file with the learner's settings (`crm_api::PpoConfig`, or `crm_api::SacConfig`
+    /// for crm-sac); defaults cite the paper.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Resume from this checkpoint (same algorithm and machine).
@@ -52,19 +53,26 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.steps <= 0 {
         bail!("--steps must be positive, got {}", args.steps);
     }
-    if !args.algo.available() {
-        bail!(
-            "--algo {} is not available yet; use crm-ppo, ippo, lppo or ppo",
-            args.algo.name()
-        );
-    }
-    let config: PpoConfig = match &args.config {
+    let text = match &args.config {
         Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?
         }
-        None => PpoConfig::default(),
+        None => "{}".to_string(),
+    };
+    let parse_error = |e: serde_json::Error| {
+        let name = args.config.as_ref().map(|p| p.display().to_string());
+        anyhow::anyhow!("parsing {}: {e}", name.unwrap_or_default())
+    };
+    let (config, sac) = if args.algo == Algorithm::CrmSac {
+        (
+            PpoConfig::default(),
+            serde_json::from_str::<SacConfig>(&text).map_err(parse_error)?,
+        )
+    } else {
+        (
+            serde_json::from_str::<PpoConfig>(&text).map_err(parse_error)?,
+            SacConfig::default(),
+        )
     };
     let spec = TrainSpec {
         algorithm: args.algo,
@@ -75,6 +83,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         topology: args.topology.clone(),
         envs: args.envs,
         config,
+        sac,
     };
     let mut trainer = Trainer::new(spec, &args.env, args.resume.as_deref())?;
     std::fs::create_dir_all(&args.out)
@@ -126,7 +135,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if trainer.stopped_early() {
         bar.println(format!(
             "early stop: the last {} episodes reached the success threshold",
-            trainer.spec().config.early_stop_window
+            trainer.early_stop_window()
         ));
     }
     bar.finish();

@@ -5,16 +5,23 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, bail};
+use candle_core::{Device, Tensor};
 use crm_api::{EvalReport, EvalSpec, Row};
-use crm_learn::{Checkpoint, Layout, Ppo, PpoConfig};
+use crm_learn::{Checkpoint, Layout, Ppo, PpoConfig, SacNets};
 use grasp_sim::GraspEnv;
 use grasp_sim::benchmark::Objective;
 
 use crate::commands::EnvArgs;
 
+/// A checkpoint's networks: the PPO family's actor-critic or SAC's actor and critics.
+pub enum PolicyNet {
+    Ppo(Box<Ppo>),
+    Sac(Box<SacNets>),
+}
+
 /// A loaded checkpoint ready to act deterministically in its machine.
 pub struct LoadedPolicy {
-    pub ppo: Ppo,
+    pub net: PolicyNet,
     pub machine: crm::Machine,
     pub algorithm: String,
     pub trained_steps: u64,
@@ -29,26 +36,64 @@ impl LoadedPolicy {
         } else {
             env.machine()?
         };
-        let (net, header) = Checkpoint::load(path, &machine.spec().hash(), grasp_sim::ENV_VERSION)?;
-        if net.layout() != Layout::of(&machine) {
+        let hash = machine.spec().hash();
+        let (net, header) = if algorithm == "crm-sac" {
+            let (nets, header) = Checkpoint::load_sac(path, &hash, grasp_sim::ENV_VERSION)?;
+            (PolicyNet::Sac(Box::new(nets)), header)
+        } else {
+            let (net, header) = Checkpoint::load(path, &hash, grasp_sim::ENV_VERSION)?;
+            let config = PpoConfig {
+                hidden: header.hidden.clone(),
+                ..PpoConfig::default()
+            };
+            let mut ppo = Ppo::new(net.layout(), config, 0)?;
+            ppo.net = net;
+            (PolicyNet::Ppo(Box::new(ppo)), header)
+        };
+        if header.layout != Layout::of(&machine) {
             bail!(
                 "checkpoint {}: network layout {:?} does not fit the machine",
                 path.display(),
-                net.layout()
+                header.layout
             );
         }
-        let config = PpoConfig {
-            hidden: header.hidden.clone(),
-            ..PpoConfig::default()
-        };
-        let mut ppo = Ppo::new(net.layout(), config, 0)?;
-        ppo.net = net;
         Ok(Self {
-            ppo,
+            net,
             machine,
             algorithm: header.algorithm,
             trained_steps: header.steps,
         })
+    }
+
+    /// The deterministic action (the Gaussian's mean; SAC: `tanh` of it), zero outside the
+    /// stage's action set.
+    pub fn act(&mut self, state: &[f32], stage: usize, mask: &[f32]) -> anyhow::Result<Vec<f32>> {
+        let action = match &mut self.net {
+            PolicyNet::Ppo(ppo) => ppo.act(state, stage, mask, true)?.0,
+            PolicyNet::Sac(nets) => {
+                let input = nets.input(&[state.to_vec()], &[stage])?;
+                let mask = Tensor::from_vec(mask.to_vec(), (1, mask.len()), &Device::Cpu)?;
+                nets.mean_action(&input, &mask)?.squeeze(0)?.to_vec1()?
+            }
+        };
+        Ok(action.iter().zip(mask).map(|(a, m)| a * m).collect())
+    }
+
+    /// The critic's value of the state (SAC: `min Q` of the deterministic action).
+    pub fn value(&self, state: &[f32], stage: usize, mask: &[f32]) -> anyhow::Result<f32> {
+        let value = match &self.net {
+            PolicyNet::Ppo(ppo) => {
+                let input = ppo.net.input(&[state.to_vec()], &[stage])?;
+                ppo.net.value(&input)?
+            }
+            PolicyNet::Sac(nets) => {
+                let input = nets.input(&[state.to_vec()], &[stage])?;
+                let mask = Tensor::from_vec(mask.to_vec(), (1, mask.len()), &Device::Cpu)?;
+                let action = nets.mean_action(&input, &mask)?;
+                nets.min_q(&input, &action)?
+            }
+        };
+        Ok(value.to_vec1::<f32>()?.first().copied().unwrap_or(0.0))
     }
 }
 
@@ -75,12 +120,9 @@ pub fn evaluate(
         bail!("episodes must be positive");
     }
     let benchmark = env.benchmark()?;
-    let LoadedPolicy {
-        mut ppo,
-        machine,
-        algorithm,
-        trained_steps,
-    } = LoadedPolicy::load(path, env)?;
+    let mut policy = LoadedPolicy::load(path, env)?;
+    let (algorithm, trained_steps) = (policy.algorithm.clone(), policy.trained_steps);
+    let machine = policy.machine.clone();
     let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
     super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?.apply(&mut grasp)?;
     let mut crm_env = crm::CrmEnv::new(machine, grasp, crm::RewardMode::Crm);
@@ -91,7 +133,7 @@ pub fn evaluate(
         let objective = crm_env.env().objective();
         let (success, length) = loop {
             let mask = crm_env.machine().action_mask(stage);
-            let (action, _) = ppo.act(&state, stage, &mask, true)?;
+            let action = policy.act(&state, stage, &mask)?;
             let step = crm_env.step(&action)?;
             if step.done || step.truncated {
                 let success = step.done && crm_env.machine().stage_name(step.stage) == "success";

@@ -1,5 +1,5 @@
-//! A training run: vectorized rollouts and PPO updates inside the grasping CRM, one iteration
-//! at a time so that a caller (the CLI's progress bar, the service worker's heartbeat) can
+//! A training run: vectorized rollouts and learner updates (PPO, or SAC for crm-sac) inside
+//! the grasping CRM, one iteration at a time so that a caller (the CLI's progress bar, the service worker's heartbeat) can
 //! report between them and save checkpoints. A run can start from a checkpoint of the same
 //! machine: it keeps the steps already trained (so the learning-rate steps stay where they
 //! were) and reseeds its environments and noise from (seed, steps), so a resumed run is
@@ -11,17 +11,23 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use crm_api::{Algorithm, Iteration, TrainSpec};
 use crm_learn::checkpoint::FORMAT;
-use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, VecEnv};
+use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, Sac, VecEnv};
 use grasp_sim::GraspEnv;
 
 use crate::commands::EnvArgs;
+
+/// The learner of a run.
+enum Learner {
+    Ppo(Box<Ppo>),
+    Sac(Box<Sac>),
+}
 
 /// A run in progress.
 pub struct Trainer {
     spec: TrainSpec,
     envs: VecEnv<GraspEnv>,
     env_count: usize,
-    ppo: Ppo,
+    learner: Learner,
     early_stop: EarlyStop,
     layout: Layout,
     spec_hash: String,
@@ -39,13 +45,8 @@ impl Trainer {
         if spec.steps == 0 {
             bail!("steps must be positive");
         }
-        if !spec.algorithm.available() {
-            bail!(
-                "algorithm {} is not available yet; use crm-ppo, ippo, lppo or ppo",
-                spec.algorithm.name()
-            );
-        }
         spec.config.validate()?;
+        spec.sac.validate()?;
         let benchmark = env.benchmark()?;
         let machine = match spec.algorithm {
             Algorithm::Ppo => env.machine_or(grasp_sim::spec::flat_spec())?,
@@ -58,32 +59,59 @@ impl Trainer {
         }
         let spec_hash = machine.spec().hash();
         let layout = Layout::of(&machine);
-        let resume = match init {
-            Some(path) => {
-                let (net, header) = Checkpoint::load(path, &spec_hash, grasp_sim::ENV_VERSION)?;
-                if header.algorithm != spec.algorithm.name() {
-                    bail!(
-                        "checkpoint {} was trained with {}, not {}",
-                        path.display(),
-                        header.algorithm,
-                        spec.algorithm.name()
-                    );
-                }
-                Some((net, header.steps))
+        let is_sac = spec.algorithm == Algorithm::CrmSac;
+        let mut start_steps = 0;
+        let mut resume_ppo = None;
+        let mut resume_sac = None;
+        if let Some(path) = init {
+            let header = Checkpoint::read_header(path)?;
+            if header.algorithm != spec.algorithm.name() {
+                bail!(
+                    "checkpoint {} was trained with {}, not {}",
+                    path.display(),
+                    header.algorithm,
+                    spec.algorithm.name()
+                );
             }
-            None => None,
-        };
-        let start_steps = resume.as_ref().map_or(0, |(_, steps)| *steps);
+            start_steps = header.steps;
+            if is_sac {
+                resume_sac =
+                    Some(Checkpoint::load_sac(path, &spec_hash, grasp_sim::ENV_VERSION)?.0);
+            } else {
+                resume_ppo = Some(Checkpoint::load(path, &spec_hash, grasp_sim::ENV_VERSION)?.0);
+            }
+        }
         let seed = if start_steps == 0 {
             spec.seed
         } else {
             spec.seed ^ start_steps.wrapping_mul(0xD1B5_4A32_D192_ED03)
         };
-        let mut ppo = Ppo::new(layout, spec.config.clone(), seed)?;
-        if let Some((net, _)) = &resume {
-            ppo.load_weights(net)
-                .context("resuming from the checkpoint")?;
-        }
+        let learner = if is_sac {
+            let masks = (0..machine.stage_count())
+                .map(|s| machine.action_mask(s))
+                .collect();
+            let mut sac = Sac::new(layout, spec.sac.clone(), masks, seed)?;
+            if let Some(nets) = &resume_sac {
+                sac.load_weights(nets)
+                    .context("resuming from the checkpoint")?;
+            }
+            Learner::Sac(Box::new(sac))
+        } else {
+            let mut ppo = Ppo::new(layout, spec.config.clone(), seed)?;
+            if let Some(net) = &resume_ppo {
+                ppo.load_weights(net)
+                    .context("resuming from the checkpoint")?;
+            }
+            Learner::Ppo(Box::new(ppo))
+        };
+        let (window, threshold) = if is_sac {
+            (spec.sac.early_stop_window, spec.sac.early_stop_success)
+        } else {
+            (
+                spec.config.early_stop_window,
+                spec.config.early_stop_success,
+            )
+        };
         let envs = (0..env_count)
             .map(|_| {
                 let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
@@ -100,14 +128,11 @@ impl Trainer {
             .map(|s| machine.stage_name(s).to_string())
             .collect();
         Ok(Self {
-            early_stop: EarlyStop::new(
-                spec.config.early_stop_window,
-                spec.config.early_stop_success,
-            ),
+            early_stop: EarlyStop::new(window, threshold),
             spec,
             envs,
             env_count,
-            ppo,
+            learner,
             layout,
             spec_hash,
             stage_names,
@@ -117,10 +142,6 @@ impl Trainer {
             iteration: 0,
             stopped_early: false,
         })
-    }
-
-    pub fn spec(&self) -> &TrainSpec {
-        &self.spec
     }
 
     /// Environment steps trained so far (a resumed run starts at the checkpoint's).
@@ -137,18 +158,46 @@ impl Trainer {
         self.stopped_early
     }
 
-    /// One rollout and one PPO update.
+    /// Episodes the early-stop rule looks back over.
+    pub fn early_stop_window(&self) -> usize {
+        match self.learner {
+            Learner::Sac(_) => self.spec.sac.early_stop_window,
+            Learner::Ppo(_) => self.spec.config.early_stop_window,
+        }
+    }
+
+    /// One rollout and one learner update (PPO: one update over the rollout; SAC: the
+    /// rollout stored, then gradient steps from the replay buffer).
     pub fn iterate(&mut self) -> anyhow::Result<Iteration> {
-        let config = &self.spec.config;
         let remaining = self.spec.steps.saturating_sub(self.done) as usize;
-        let steps = config.rollout_steps.min(remaining.max(1));
-        let rollout = self
-            .envs
-            .collect(&mut self.ppo, steps.div_ceil(self.env_count))?;
+        let per_iteration = match self.learner {
+            Learner::Ppo(_) => self.spec.config.rollout_steps,
+            Learner::Sac(_) => self.spec.sac.rollout_steps,
+        };
+        let steps_per_env = per_iteration.min(remaining.max(1)).div_ceil(self.env_count);
+        let (rollout, stats) = match &mut self.learner {
+            Learner::Ppo(ppo) => {
+                let rollout = self.envs.collect(ppo.as_mut(), steps_per_env)?;
+                let progress = (self.done + rollout.len() as u64) as f64 / self.spec.steps as f64;
+                let stats = ppo.update(&rollout, progress)?;
+                (rollout, stats)
+            }
+            Learner::Sac(sac) => {
+                let rollout = self.envs.collect(sac.as_mut(), steps_per_env)?;
+                sac.store(&rollout);
+                let s = sac.update(rollout.len())?;
+                let stats = crm_learn::UpdateStats {
+                    policy_loss: s.actor_loss,
+                    value_loss: s.critic_loss,
+                    entropy: s.entropy,
+                    approx_kl: 0.0,
+                    clipfrac: 0.0,
+                    learning_rate: self.spec.sac.learning_rate,
+                };
+                (rollout, stats)
+            }
+        };
         self.done += rollout.len() as u64;
-        let stats = self
-            .ppo
-            .update(&rollout, self.done as f64 / self.spec.steps as f64)?;
         self.iteration += 1;
         for &(success, _, _) in &rollout.episodes {
             self.stopped_early |= self.early_stop.record(success);
@@ -199,12 +248,21 @@ impl Trainer {
             seed: self.spec.seed,
             steps: self.done,
             layout: self.layout,
-            hidden: self.spec.config.hidden.clone(),
-            config: serde_json::to_value(&self.spec.config)?,
+            hidden: match self.learner {
+                Learner::Ppo(_) => self.spec.config.hidden.clone(),
+                Learner::Sac(_) => self.spec.sac.hidden.clone(),
+            },
+            config: match self.learner {
+                Learner::Ppo(_) => serde_json::to_value(&self.spec.config)?,
+                Learner::Sac(_) => serde_json::to_value(&self.spec.sac)?,
+            },
         };
         // Write beside and rename, so a reader never sees half a checkpoint.
         let partial = path.with_extension("safetensors.partial");
-        Checkpoint::save(&self.ppo.net, &header, &partial)?;
+        match &self.learner {
+            Learner::Ppo(ppo) => Checkpoint::save(&ppo.net, &header, &partial)?,
+            Learner::Sac(sac) => Checkpoint::save_params(&sac.nets.params, &header, &partial)?,
+        }
         std::fs::rename(&partial, path)
             .with_context(|| format!("moving the checkpoint to {}", path.display()))?;
         Ok(())

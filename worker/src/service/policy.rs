@@ -89,20 +89,14 @@ impl PolicyService {
             .map_err(|e| internal(&e))?;
         let mask = machine.action_mask(stage);
         let stage_name = machine.stage_name(stage).to_string();
-        let (action, _) = policy
-            .ppo
-            .act(&state, stage, &mask, true)
-            .map_err(|e| internal(&e))?;
-        let net = &policy.ppo.net;
-        let value = net
-            .input(&[state], &[stage])
-            .and_then(|input| net.value(&input))
-            .and_then(|v| Ok(v.to_vec1::<f32>()?))
+        let action = policy.act(&state, stage, &mask).map_err(|e| internal(&e))?;
+        let value = policy
+            .value(&state, stage, &mask)
             .map_err(|e| internal(&e))?;
         Ok(pb::ActReply {
-            action: action.iter().zip(&mask).map(|(a, m)| a * m).collect(),
+            action,
             stage: stage_name,
-            value: value.first().copied().unwrap_or(0.0),
+            value,
         })
     }
 }

@@ -1,0 +1,382 @@
+//! SAC inside the CRM (the paper's CRM-SAC baseline): a tanh-squashed Gaussian actor with a
+//! state-dependent scale, twin Q critics with Polyak-averaged targets, automatic entropy
+//! temperature, and a replay buffer. The reward is the CRM's (intra-stage plus transition).
+//! Dimensions outside the stage's action set are zero in every action, left out of
+//! log-probabilities, and the entropy target counts only the live ones.
+
+use candle_core::{D, Device, Tensor, Var};
+use candle_nn::{AdamW, Linear, Optimizer, ParamsAdamW};
+use crm_api::SacConfig;
+
+use crate::error::Result;
+use crate::network::{Layout, encode, mlp, run};
+use crate::noise::Noise;
+use crate::rollout::{Actor, Rollout};
+
+const LOG_STD_MIN: f64 = -5.0;
+const LOG_STD_MAX: f64 = 2.0;
+
+/// The actor and critics, with their parameters in a stable, named order.
+pub struct SacNets {
+    pub layout: Layout,
+    pub hidden: Vec<usize>,
+    actor: Vec<Linear>,
+    q1: Vec<Linear>,
+    q2: Vec<Linear>,
+    q1_target: Vec<Linear>,
+    q2_target: Vec<Linear>,
+    log_alpha: Var,
+    /// `(name, var)`: actor, critics, targets, temperature.
+    pub params: Vec<(String, Var)>,
+    device: Device,
+}
+
+impl SacNets {
+    pub fn new(layout: Layout, hidden: &[usize], seed: u64) -> Result<Self> {
+        let device = Device::Cpu;
+        let mut noise = Noise::new(seed);
+        let mut params = Vec::new();
+        let mut widths = vec![layout.input_width()];
+        widths.extend_from_slice(hidden);
+        widths.push(2 * layout.actions);
+        let actor = mlp(&mut noise, &device, "actor", &widths, &mut params)?;
+        let mut q_widths = vec![layout.input_width() + layout.actions];
+        q_widths.extend_from_slice(hidden);
+        q_widths.push(1);
+        let q1 = mlp(&mut noise, &device, "q1", &q_widths, &mut params)?;
+        let q2 = mlp(&mut noise, &device, "q2", &q_widths, &mut params)?;
+        let q1_target = mlp(&mut noise, &device, "q1_target", &q_widths, &mut params)?;
+        let q2_target = mlp(&mut noise, &device, "q2_target", &q_widths, &mut params)?;
+        let log_alpha = Var::from_vec(vec![0.2f32.ln()], 1, &device)?;
+        params.push(("log_alpha".into(), log_alpha.clone()));
+        let nets = Self {
+            layout,
+            hidden: hidden.to_vec(),
+            actor,
+            q1,
+            q2,
+            q1_target,
+            q2_target,
+            log_alpha,
+            params,
+            device,
+        };
+        // Targets start as copies of the critics.
+        nets.polyak(1.0)?;
+        Ok(nets)
+    }
+
+    fn vars(&self, prefix: &str) -> Vec<Var> {
+        self.params
+            .iter()
+            .filter(|(name, _)| name.split('.').next() == Some(prefix))
+            .map(|(_, v)| v.clone())
+            .collect()
+    }
+
+    /// Moves the targets `tau` of the way to the critics.
+    fn polyak(&self, tau: f64) -> Result<()> {
+        for (critic, target) in [("q1", "q1_target"), ("q2", "q2_target")] {
+            for (src, dst) in self.vars(critic).iter().zip(self.vars(target)) {
+                let blended = ((src.as_tensor() * tau)? + (dst.as_tensor() * (1.0 - tau))?)?;
+                dst.set(&blended)?;
+            }
+        }
+        Ok(())
+    }
+
+    pub fn input(&self, states: &[Vec<f32>], stages: &[usize]) -> Result<Tensor> {
+        encode(self.layout, states, stages, &self.device)
+    }
+
+    /// Pre-squash means and clamped log standard deviations `[batch, actions]` each.
+    fn head(&self, input: &Tensor) -> Result<(Tensor, Tensor)> {
+        let out = run(&self.actor, input)?;
+        let n = self.layout.actions;
+        let mean = out.narrow(1, 0, n)?;
+        let log_std = out.narrow(1, n, n)?.clamp(LOG_STD_MIN, LOG_STD_MAX)?;
+        Ok((mean, log_std))
+    }
+
+    /// The deterministic action `tanh(mean) * mask`.
+    pub fn mean_action(&self, input: &Tensor, mask: &Tensor) -> Result<Tensor> {
+        Ok((self.head(input)?.0.tanh()? * mask)?)
+    }
+
+    /// A reparameterized sample `tanh(mean + std * eps) * mask` and its log-probability over
+    /// the live dimensions (with the tanh correction).
+    fn sample(&self, input: &Tensor, mask: &Tensor, eps: &Tensor) -> Result<(Tensor, Tensor)> {
+        let (mean, log_std) = self.head(input)?;
+        let pre = (mean + (log_std.exp()? * eps)?)?;
+        let action = pre.tanh()?;
+        let half_log_two_pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
+        let gaussian = ((eps.sqr()? * -0.5)? - &log_std)?.affine(1.0, -half_log_two_pi)?;
+        let squash = (action.sqr()?.affine(-1.0, 1.0 + 1e-6)?).log()?;
+        let log_prob = ((gaussian - squash)? * mask)?.sum(D::Minus1)?;
+        Ok(((action * mask)?, log_prob))
+    }
+
+    fn q(layers: &[Linear], input: &Tensor, action: &Tensor) -> Result<Tensor> {
+        Ok(run(layers, &Tensor::cat(&[input, action], 1)?)?.squeeze(1)?)
+    }
+
+    /// `min(Q1, Q2)` of an action: `[batch]`.
+    pub fn min_q(&self, input: &Tensor, action: &Tensor) -> Result<Tensor> {
+        Ok(Self::q(&self.q1, input, action)?.minimum(&Self::q(&self.q2, input, action)?)?)
+    }
+
+    pub fn alpha(&self) -> Result<f32> {
+        Ok(self.log_alpha.as_tensor().exp()?.to_vec1::<f32>()?[0])
+    }
+}
+
+/// One stored transition.
+#[derive(Clone, Debug)]
+struct Stored {
+    state: Vec<f32>,
+    stage: usize,
+    action: Vec<f32>,
+    mask: Vec<f32>,
+    reward: f32,
+    next_state: Vec<f32>,
+    next_stage: usize,
+    next_mask: Vec<f32>,
+    terminal: bool,
+}
+
+/// What one iteration of updates reports.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SacStats {
+    pub critic_loss: f32,
+    pub actor_loss: f32,
+    pub alpha: f32,
+    pub entropy: f32,
+    pub updates: usize,
+}
+
+/// The learner: networks, optimizers, replay buffer and noise.
+pub struct Sac {
+    pub nets: SacNets,
+    pub config: SacConfig,
+    actor_opt: AdamW,
+    critic_opt: AdamW,
+    alpha_opt: AdamW,
+    buffer: Vec<Stored>,
+    next_slot: usize,
+    seen: usize,
+    noise: Noise,
+    /// Masks of the machine's stages, to fill `next_mask`.
+    stage_masks: Vec<Vec<f32>>,
+}
+
+impl Sac {
+    /// `stage_masks[s]` is the action mask of stage `s`.
+    pub fn new(
+        layout: Layout,
+        config: SacConfig,
+        stage_masks: Vec<Vec<f32>>,
+        seed: u64,
+    ) -> Result<Self> {
+        config.validate()?;
+        let nets = SacNets::new(layout, &config.hidden, seed)?;
+        let adam = |vars: Vec<Var>| {
+            AdamW::new(
+                vars,
+                ParamsAdamW {
+                    lr: config.learning_rate,
+                    weight_decay: 0.0,
+                    ..ParamsAdamW::default()
+                },
+            )
+        };
+        let mut critic_vars = nets.vars("q1");
+        critic_vars.extend(nets.vars("q2"));
+        Ok(Self {
+            actor_opt: adam(nets.vars("actor"))?,
+            critic_opt: adam(critic_vars)?,
+            alpha_opt: adam(vec![nets.log_alpha.clone()])?,
+            nets,
+            config,
+            buffer: Vec::new(),
+            next_slot: 0,
+            seen: 0,
+            noise: Noise::new(seed ^ 0x5AC5_AC5A),
+            stage_masks,
+        })
+    }
+
+    /// Copies the networks of `other` (same layout and widths), keeping the optimizers bound
+    /// to this learner's: how a run resumes from a checkpoint. The replay buffer starts empty.
+    pub fn load_weights(&mut self, other: &SacNets) -> Result<()> {
+        if other.layout != self.nets.layout || other.hidden != self.nets.hidden {
+            return Err(crate::Error::Config {
+                field: "hidden",
+                message: "checkpoint networks do not match this learner's".into(),
+            });
+        }
+        for ((_, mine), (_, theirs)) in self.nets.params.iter().zip(&other.params) {
+            mine.set(theirs.as_tensor())?;
+        }
+        Ok(())
+    }
+
+    /// Transitions stored so far (over the whole run).
+    pub fn seen(&self) -> usize {
+        self.seen
+    }
+
+    fn normals(&mut self, rows: usize) -> Result<Tensor> {
+        let n = self.nets.layout.actions;
+        let data: Vec<f32> = (0..rows * n).map(|_| self.noise.normal()).collect();
+        Ok(Tensor::from_vec(data, (rows, n), &self.nets.device)?)
+    }
+
+    /// Stores a rollout's transitions (the CRM reward: intra-stage plus transition).
+    pub fn store(&mut self, rollout: &Rollout) {
+        for t in 0..rollout.len() {
+            let item = Stored {
+                state: rollout.states[t].clone(),
+                stage: rollout.stages[t],
+                action: rollout.actions[t].clone(),
+                mask: rollout.masks[t].clone(),
+                reward: rollout.intra[t] + rollout.transition[t],
+                next_state: rollout.next_states[t].clone(),
+                next_stage: rollout.next_stages[t],
+                next_mask: self
+                    .stage_masks
+                    .get(rollout.next_stages[t])
+                    .cloned()
+                    .unwrap_or_else(|| vec![0.0; self.nets.layout.actions]),
+                terminal: rollout.terminal[t],
+            };
+            if self.buffer.len() < self.config.buffer_size {
+                self.buffer.push(item);
+            } else {
+                self.buffer[self.next_slot] = item;
+            }
+            self.next_slot = (self.next_slot + 1) % self.config.buffer_size;
+            self.seen += 1;
+        }
+    }
+
+    /// Gradient steps for `env_steps` new environment steps (none before `learning_starts`).
+    pub fn update(&mut self, env_steps: usize) -> Result<SacStats> {
+        let mut stats = SacStats::default();
+        if self.seen < self.config.learning_starts || self.buffer.is_empty() {
+            stats.alpha = self.nets.alpha()?;
+            return Ok(stats);
+        }
+        let steps = ((env_steps as f32) * self.config.updates_per_step).ceil() as usize;
+        for _ in 0..steps {
+            let s = self.step()?;
+            stats.critic_loss += s.critic_loss / steps as f32;
+            stats.actor_loss += s.actor_loss / steps as f32;
+            stats.entropy += s.entropy / steps as f32;
+        }
+        stats.updates = steps;
+        stats.alpha = self.nets.alpha()?;
+        Ok(stats)
+    }
+
+    fn step(&mut self) -> Result<SacStats> {
+        let batch = self.config.batch_size.min(self.buffer.len());
+        let picks: Vec<usize> = (0..batch)
+            .map(|_| {
+                (self.noise.unit_f32() * self.buffer.len() as f32) as usize % self.buffer.len()
+            })
+            .collect();
+        let rows = |f: &dyn Fn(&Stored) -> Vec<f32>| -> Vec<Vec<f32>> {
+            picks.iter().map(|&i| f(&self.buffer[i])).collect()
+        };
+        let device = self.nets.device.clone();
+        let n = self.nets.layout.actions;
+        let matrix = |data: Vec<Vec<f32>>| -> Result<Tensor> {
+            Ok(Tensor::from_vec(data.concat(), (batch, n), &device)?)
+        };
+        let states = rows(&|s| s.state.clone());
+        let next_states = rows(&|s| s.next_state.clone());
+        let stages: Vec<usize> = picks.iter().map(|&i| self.buffer[i].stage).collect();
+        let next_stages: Vec<usize> = picks.iter().map(|&i| self.buffer[i].next_stage).collect();
+        let actions = matrix(rows(&|s| s.action.clone()))?;
+        let masks = matrix(rows(&|s| s.mask.clone()))?;
+        let next_masks = matrix(rows(&|s| s.next_mask.clone()))?;
+        let rewards: Vec<f32> = picks.iter().map(|&i| self.buffer[i].reward).collect();
+        let alive: Vec<f32> = picks
+            .iter()
+            .map(|&i| if self.buffer[i].terminal { 0.0 } else { 1.0 })
+            .collect();
+        let rewards = Tensor::from_vec(rewards, batch, &device)?;
+        let alive = Tensor::from_vec(alive, batch, &device)?;
+        let input = self.nets.input(&states, &stages)?;
+        let next_input = self.nets.input(&next_states, &next_stages)?;
+        let alpha = self.nets.log_alpha.as_tensor().exp()?.detach();
+
+        // Critics: y = r + gamma * alive * (min Q_target(s', a') - alpha * log pi(a'|s')).
+        let eps = self.normals(batch)?;
+        let (next_action, next_log_prob) = self.nets.sample(&next_input, &next_masks, &eps)?;
+        let next_q = SacNets::q(&self.nets.q1_target, &next_input, &next_action)?.minimum(
+            &SacNets::q(&self.nets.q2_target, &next_input, &next_action)?,
+        )?;
+        let soft = (next_q - next_log_prob.broadcast_mul(&alpha)?)?;
+        let target =
+            (rewards + (alive * soft)?.affine(f64::from(self.config.gamma), 0.0)?)?.detach();
+        let q1 = SacNets::q(&self.nets.q1, &input, &actions)?;
+        let q2 = SacNets::q(&self.nets.q2, &input, &actions)?;
+        let critic_loss =
+            ((q1 - &target)?.sqr()?.mean_all()? + (q2 - &target)?.sqr()?.mean_all()?)?;
+        self.critic_opt.backward_step(&critic_loss)?;
+
+        // Actor: minimize alpha * log pi(a|s) - min Q(s, a) with a reparameterized sample.
+        let eps = self.normals(batch)?;
+        let (action, log_prob) = self.nets.sample(&input, &masks, &eps)?;
+        let actor_loss =
+            (log_prob.broadcast_mul(&alpha)? - self.nets.min_q(&input, &action)?)?.mean_all()?;
+        self.actor_opt.backward_step(&actor_loss)?;
+
+        // Temperature: keep the entropy near the target for the live dimensions.
+        let live = masks.sum(D::Minus1)?;
+        let target_entropy = live.affine(f64::from(self.config.target_entropy_per_dim), 0.0)?;
+        let gap = (log_prob.detach() + target_entropy)?;
+        let alpha_loss =
+            (self.nets.log_alpha.as_tensor().broadcast_mul(&gap)? * -1.0)?.mean_all()?;
+        self.alpha_opt.backward_step(&alpha_loss)?;
+        self.nets.polyak(f64::from(self.config.tau))?;
+        Ok(SacStats {
+            critic_loss: critic_loss.to_scalar::<f32>()?,
+            actor_loss: actor_loss.to_scalar::<f32>()?,
+            alpha: 0.0,
+            entropy: -log_prob.mean_all()?.to_scalar::<f32>()?,
+            updates: 1,
+        })
+    }
+}
+
+impl Actor for Sac {
+    fn act_batch(
+        &mut self,
+        states: &[Vec<f32>],
+        stages: &[usize],
+        masks: &[Vec<f32>],
+        deterministic: bool,
+    ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
+        let rows = states.len();
+        let n = self.nets.layout.actions;
+        let mask = Tensor::from_vec(masks.concat(), (rows, n), &self.nets.device)?;
+        if !deterministic && self.seen < self.config.learning_starts {
+            // Uniform exploration before learning starts.
+            let data: Vec<f32> = (0..rows * n)
+                .map(|_| 2.0 * self.noise.unit_f32() - 1.0)
+                .collect();
+            let action = (Tensor::from_vec(data, (rows, n), &self.nets.device)? * mask)?;
+            return Ok((action.to_vec2()?, vec![0.0; rows]));
+        }
+        let input = self.nets.input(states, stages)?;
+        let action = if deterministic {
+            self.nets.mean_action(&input, &mask)?
+        } else {
+            let eps = self.normals(rows)?;
+            self.nets.sample(&input, &mask, &eps)?.0
+        };
+        Ok((action.to_vec2()?, vec![0.0; rows]))
+    }
+}
