@@ -42,6 +42,10 @@ struct LearnReport {
     update_epochs: usize,
     minibatch_size: usize,
     hidden: Vec<usize>,
+    /// CRM-SAC gradient steps per second (default `SacConfig`: batch 256, the same widths)
+    /// over the rollout above stored in its replay buffer.
+    sac_gradient_steps_per_sec: f64,
+    sac_batch_size: usize,
 }
 
 #[derive(clap::Args, Debug)]
@@ -195,6 +199,24 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
     let start = Instant::now();
     ppo.update(&rollout, 0.0)?;
     let update_secs = start.elapsed().as_secs_f64();
+    let sac_config = crm_api::SacConfig {
+        learning_starts: 0,
+        ..crm_api::SacConfig::default()
+    };
+    let masks = (0..machine.stage_count())
+        .map(|s| machine.action_mask(s))
+        .collect();
+    let mut sac = crm_learn::Sac::new(
+        crm_learn::Layout::of(&machine),
+        sac_config.clone(),
+        masks,
+        1,
+    )?;
+    sac.store(&rollout);
+    let sac_steps = 20;
+    let start = Instant::now();
+    sac.update(sac_steps)?;
+    let sac_secs = start.elapsed().as_secs_f64();
     let report = LearnReport {
         envs: env_count,
         rollout_steps: rollout.len(),
@@ -203,6 +225,8 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
         update_epochs: config.update_epochs,
         minibatch_size: config.minibatch_size,
         hidden: config.hidden,
+        sac_gradient_steps_per_sec: sac_steps as f64 / sac_secs,
+        sac_batch_size: sac_config.batch_size,
     };
     if args.json {
         emit(&format!("{}\n", serde_json::to_string(&report)?))

@@ -1,9 +1,10 @@
 //! A training run: vectorized rollouts and learner updates (PPO, or SAC for crm-sac) inside
-//! the grasping CRM, one iteration at a time so that a caller (the CLI's progress bar, the service worker's heartbeat) can
-//! report between them and save checkpoints. A run can start from a checkpoint of the same
-//! machine: it keeps the steps already trained (so the learning-rate steps stay where they
-//! were) and reseeds its environments and noise from (seed, steps), so a resumed run is
-//! reproducible but not the same as the uninterrupted one.
+//! the grasping CRM, one iteration at a time so that a caller (the CLI's progress bar, the
+//! service worker's heartbeat) can report between them and save checkpoints. A run can start
+//! from a checkpoint of the same machine: it keeps the steps already trained (so the
+//! learning-rate steps stay where they were) and reseeds its environments and noise from
+//! (seed, steps), so a resumed run is reproducible but not the same as the uninterrupted one.
+//! A resumed SAC run starts with an empty replay buffer.
 
 use std::path::Path;
 use std::time::Instant;
