@@ -35,6 +35,8 @@ enum Command {
     Train(commands::train::TrainArgs),
     /// Evaluate a checkpoint over random tasks: success and episode length per objective.
     Eval(commands::eval::EvalArgs),
+    /// Train and evaluate every algorithm at one budget; write RESULTS.md and PNG curves.
+    Results(commands::results::ResultsArgs),
     /// The grasp-topology selection network: train it or ask it.
     #[command(subcommand)]
     Topology(commands::topology::TopologyCommand),
@@ -54,6 +56,7 @@ fn main() -> std::process::ExitCode {
         Command::Spec(args) => commands::tasks::run_spec(args),
         Command::Train(args) => commands::train::run(args),
         Command::Eval(args) => commands::eval::run(args),
+        Command::Results(args) => commands::results::run(args),
         Command::Topology(command) => commands::topology::run(command),
         Command::Bench(command) => commands::bench::run(command),
     };

@@ -269,3 +269,63 @@ fn the_topology_network_trains_and_predicts_the_benchmark_topology() {
     assert!(stderr.contains("unknown objective"), "{stderr}");
     std::fs::remove_file(&model).ok();
 }
+
+#[test]
+fn results_writes_table_i_and_png_curves() {
+    let dir = std::env::temp_dir().join(format!("crm-cli-results-{}", std::process::id()));
+    let out = dir.join("docs");
+    let checkpoints = dir.join("checkpoints");
+    let sac = dir.join("sac.json");
+    std::fs::create_dir_all(&dir).expect("dir");
+    std::fs::write(
+        &sac,
+        r#"{"learning_starts": 64, "batch_size": 32, "rollout_steps": 128, "hidden": [32]}"#,
+    )
+    .expect("write");
+    let (code, _, stderr) = crm(&[
+        "results",
+        "--steps",
+        "256",
+        "--episodes",
+        "2",
+        "--task",
+        "mouse-press",
+        "--algo",
+        "crm-ppo",
+        "--algo",
+        "crm-sac",
+        "--sac-config",
+        sac.to_str().expect("path"),
+        "--out",
+        out.to_str().expect("path"),
+        "--checkpoints",
+        checkpoints.to_str().expect("path"),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let table = std::fs::read_to_string(out.join("RESULTS.md")).expect("RESULTS.md");
+    assert!(
+        table.contains("| objective | crm-ppo | crm-sac |"),
+        "{table}"
+    );
+    assert!(table.contains("| press |"), "{table}");
+    assert!(table.contains("| overall |"), "{table}");
+    assert!(
+        table.contains("256 environment steps per algorithm"),
+        "{table}"
+    );
+    for plot in ["success.png", "return.png"] {
+        let bytes = std::fs::read(out.join("results").join(plot)).expect("plot");
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{plot} is a PNG");
+    }
+    assert!(checkpoints.join("crm-sac.safetensors").exists());
+    let (code, _, stderr) = crm(&[
+        "results",
+        "--steps",
+        "0",
+        "--out",
+        out.to_str().expect("path"),
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("must be positive"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
