@@ -79,18 +79,13 @@ impl PpoConfig {
 
     /// Refuses values out of their domain, naming the field.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let bad = |field: &'static str, message: &str| {
-            Err(ConfigError {
-                field,
-                message: message.to_string(),
-            })
-        };
-        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
-            return bad("learning_rate", "must be positive");
-        }
-        if !(0.0..=1.0).contains(&self.gamma) {
-            return bad("gamma", "must be in [0, 1]");
-        }
+        check_common(&Common {
+            learning_rate: self.learning_rate,
+            gamma: self.gamma,
+            hidden: &self.hidden,
+            early_stop_success: self.early_stop_success,
+            early_stop_window: self.early_stop_window,
+        })?;
         if !(0.0..=1.0).contains(&self.gae_lambda) {
             return bad("gae_lambda", "must be in [0, 1]");
         }
@@ -112,17 +107,43 @@ impl PpoConfig {
                 "epochs and rollout steps must be at least 1",
             );
         }
-        if self.hidden.is_empty() || self.hidden.contains(&0) {
-            return bad("hidden", "needs at least one layer and no zero width");
-        }
-        if !(0.0..=1.0).contains(&self.early_stop_success) || self.early_stop_window == 0 {
-            return bad(
-                "early_stop_success",
-                "must be in [0, 1] with a window of at least 1",
-            );
-        }
         Ok(())
     }
+}
+
+fn bad(field: &'static str, message: &str) -> Result<(), ConfigError> {
+    Err(ConfigError {
+        field,
+        message: message.to_string(),
+    })
+}
+
+/// The settings PPO and SAC share, checked alike.
+struct Common<'a> {
+    learning_rate: f64,
+    gamma: f32,
+    hidden: &'a [usize],
+    early_stop_success: f32,
+    early_stop_window: usize,
+}
+
+fn check_common(c: &Common<'_>) -> Result<(), ConfigError> {
+    if !(c.learning_rate.is_finite() && c.learning_rate > 0.0) {
+        return bad("learning_rate", "must be positive");
+    }
+    if !(0.0..=1.0).contains(&c.gamma) {
+        return bad("gamma", "must be in [0, 1]");
+    }
+    if c.hidden.is_empty() || c.hidden.contains(&0) {
+        return bad("hidden", "needs at least one layer and no zero width");
+    }
+    if !(0.0..=1.0).contains(&c.early_stop_success) || c.early_stop_window == 0 {
+        return bad(
+            "early_stop_success",
+            "must be in [0, 1] with a window of at least 1",
+        );
+    }
+    Ok(())
 }
 
 /// Knobs of SAC inside the CRM (the paper's CRM-SAC baseline, section V-A). The paper gives
@@ -179,18 +200,13 @@ impl Default for SacConfig {
 impl SacConfig {
     /// Refuses values out of their domain, naming the field.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let bad = |field: &'static str, message: &str| {
-            Err(ConfigError {
-                field,
-                message: message.to_string(),
-            })
-        };
-        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
-            return bad("learning_rate", "must be positive");
-        }
-        if !(0.0..=1.0).contains(&self.gamma) {
-            return bad("gamma", "must be in [0, 1]");
-        }
+        check_common(&Common {
+            learning_rate: self.learning_rate,
+            gamma: self.gamma,
+            hidden: &self.hidden,
+            early_stop_success: self.early_stop_success,
+            early_stop_window: self.early_stop_window,
+        })?;
         if !(self.tau > 0.0 && self.tau <= 1.0) {
             return bad("tau", "must be in (0, 1]");
         }
@@ -203,17 +219,8 @@ impl SacConfig {
         if self.rollout_steps == 0 {
             return bad("rollout_steps", "must be at least 1");
         }
-        if self.hidden.is_empty() || self.hidden.contains(&0) {
-            return bad("hidden", "needs at least one layer and no zero width");
-        }
         if !self.target_entropy_per_dim.is_finite() {
             return bad("target_entropy_per_dim", "must be finite");
-        }
-        if !(0.0..=1.0).contains(&self.early_stop_success) || self.early_stop_window == 0 {
-            return bad(
-                "early_stop_success",
-                "must be in [0, 1] with a window of at least 1",
-            );
         }
         Ok(())
     }
@@ -246,5 +253,38 @@ mod tests {
             .to_string();
         assert!(err.contains("gamma"), "{err}");
         assert!(PpoConfig::default().validate().is_ok());
+        for (config, field) in [
+            (
+                SacConfig {
+                    tau: 2.0,
+                    ..SacConfig::default()
+                },
+                "tau",
+            ),
+            (
+                SacConfig {
+                    gamma: -0.1,
+                    ..SacConfig::default()
+                },
+                "gamma",
+            ),
+            (
+                SacConfig {
+                    hidden: vec![],
+                    ..SacConfig::default()
+                },
+                "hidden",
+            ),
+            (
+                SacConfig {
+                    batch_size: 0,
+                    ..SacConfig::default()
+                },
+                "batch_size",
+            ),
+        ] {
+            assert_eq!(config.validate().expect_err(field).field, field);
+        }
+        assert!(SacConfig::default().validate().is_ok());
     }
 }
