@@ -63,6 +63,20 @@ impl EnvArgs {
     }
 }
 
+/// A JSON settings file (`--config`-style flags) or, without one, the defaults.
+pub fn read_json<T: serde::de::DeserializeOwned + Default>(
+    path: &Option<PathBuf>,
+) -> anyhow::Result<T> {
+    match path {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+        }
+        None => Ok(T::default()),
+    }
+}
+
 /// The index of a task by id, or a message naming the flag and pointing at `crm tasks`.
 pub fn task_index(benchmark: &Benchmark, id: &str) -> anyhow::Result<usize> {
     benchmark

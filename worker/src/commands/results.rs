@@ -11,7 +11,7 @@ use anyhow::Context;
 use crm_api::{Algorithm, EvalReport, EvalSpec, Iteration, PpoConfig, SacConfig, TrainSpec};
 use plotters::prelude::*;
 
-use super::EnvArgs;
+use super::{EnvArgs, read_json};
 use crate::jobs::eval::evaluate;
 use crate::jobs::train::Trainer;
 
@@ -48,19 +48,6 @@ pub struct ResultsArgs {
     /// Folder for the trained checkpoints.
     #[arg(long, default_value = "runs/results")]
     pub checkpoints: PathBuf,
-}
-
-fn read_json<T: serde::de::DeserializeOwned + Default>(
-    path: &Option<PathBuf>,
-) -> anyhow::Result<T> {
-    match path {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-        }
-        None => Ok(T::default()),
-    }
 }
 
 /// One algorithm's run.

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use crm_learn::PpoConfig;
 
-use super::EnvArgs;
+use super::{EnvArgs, read_json};
 use crate::jobs::train::Trainer;
 use crm_api::{Algorithm, SacConfig, TrainSpec};
 
@@ -53,26 +53,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.steps <= 0 {
         bail!("--steps must be positive, got {}", args.steps);
     }
-    let text = match &args.config {
-        Some(path) => {
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?
-        }
-        None => "{}".to_string(),
-    };
-    let parse_error = |e: serde_json::Error| {
-        let name = args.config.as_ref().map(|p| p.display().to_string());
-        anyhow::anyhow!("parsing {}: {e}", name.unwrap_or_default())
-    };
     let (config, sac) = if args.algo == Algorithm::CrmSac {
-        (
-            PpoConfig::default(),
-            serde_json::from_str::<SacConfig>(&text).map_err(parse_error)?,
-        )
+        (PpoConfig::default(), read_json::<SacConfig>(&args.config)?)
     } else {
-        (
-            serde_json::from_str::<PpoConfig>(&text).map_err(parse_error)?,
-            SacConfig::default(),
-        )
+        (read_json::<PpoConfig>(&args.config)?, SacConfig::default())
     };
     let spec = TrainSpec {
         algorithm: args.algo,
