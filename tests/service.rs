@@ -3,21 +3,9 @@
 
 mod support;
 
-use serde_json::Value;
 use support::*;
 
 const TRAIN: &str = r#"{"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 4096, "seed": 3, "envs": 2, "config": {"rollout_steps": 1024, "learning_rate": 0.0003}}"#;
-
-fn submit(addr: &str, body: &str) -> Value {
-    let reply = http(addr, "POST", "/api/v1/jobs", Some(body), None);
-    assert_eq!(
-        reply.status,
-        201,
-        "{}",
-        String::from_utf8_lossy(&reply.body)
-    );
-    reply.json()
-}
 
 fn error_field(reply: &Reply) -> String {
     reply.json()["error"]["field"]

@@ -36,6 +36,9 @@ pub struct ServerConfig {
     /// Largest checkpoint a worker may upload, bytes.
     #[arg(long, default_value_t = 256 * 1024 * 1024)]
     pub max_checkpoint_bytes: u64,
+    /// Largest rerun recording one job may grow to, bytes.
+    #[arg(long, default_value_t = 1024 * 1024 * 1024)]
+    pub max_recording_bytes: u64,
     /// Episode summaries kept per job.
     #[arg(long, default_value_t = 200)]
     pub episodes_kept: u32,
@@ -53,6 +56,7 @@ impl Default for ServerConfig {
             max_body_bytes: 256 * 1024,
             max_concurrent_requests: 256,
             max_checkpoint_bytes: 256 * 1024 * 1024,
+            max_recording_bytes: 1024 * 1024 * 1024,
             episodes_kept: 200,
         }
     }

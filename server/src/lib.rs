@@ -1,12 +1,15 @@
-//! The crm-grasp coordinator: an axum REST API (and, later, the dashboard) and a tonic gRPC
-//! endpoint for rollout workers over one sqlite store. Jobs are leased with a heartbeat; an
-//! expired lease puts the job back in the queue and the next worker resumes it from its
-//! last uploaded checkpoint. Links neither rapier nor candle.
+//! The crm-grasp coordinator: an axum REST API, the web dashboard (`web.rs`, pages from
+//! `web/`, charts rendered as SVG in `charts.rs`) and a tonic gRPC endpoint for rollout
+//! workers over one sqlite store. Jobs are leased with a heartbeat; an expired lease puts the
+//! job back in the queue and the next worker resumes it from its last uploaded checkpoint.
+//! Links neither rapier, candle nor rerun.
 
 pub mod api;
+pub mod charts;
 pub mod config;
 pub mod grpc;
 pub mod store;
+pub mod web;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -23,13 +26,18 @@ pub struct AppState {
     pub store: Store,
     pub catalog: Arc<Catalog>,
     pub config: ServerConfig,
-    /// Woken when a job is queued or changes state.
-    pub changed: Notify,
+    /// A counter bumped when a job is queued, changes state or reports progress; live pages
+    /// follow it through `GET /api/v1/events`. [`SHUTDOWN`] ends their streams.
+    pub events: tokio::sync::watch::Sender<u64>,
 }
+
+/// The `events` value that tells live streams the coordinator is stopping.
+pub const SHUTDOWN: u64 = u64::MAX;
 
 impl AppState {
     pub fn notify(&self) {
-        self.changed.notify_waiters();
+        self.events
+            .send_modify(|v| *v = v.wrapping_add(1) % SHUTDOWN);
     }
 }
 
@@ -48,6 +56,7 @@ impl Running {
     /// expires, as if the worker had died).
     pub async fn stop(self) -> anyhow::Result<()> {
         self.shutdown.notify_waiters();
+        self.state.events.send_replace(SHUTDOWN);
         for task in self.tasks {
             let abort = task.abort_handle();
             match tokio::time::timeout(std::time::Duration::from_secs(3), task).await {
@@ -81,7 +90,7 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
         store,
         catalog,
         config: config.clone(),
-        changed: Notify::new(),
+        events: tokio::sync::watch::channel(0).0,
     });
     let http = tokio::net::TcpListener::bind(&config.http)
         .await

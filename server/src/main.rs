@@ -25,7 +25,7 @@ async fn main() -> std::process::ExitCode {
         };
         let running = crm_server::start(config).await?;
         println!(
-            "crm-server: REST http://{}/api/v1  gRPC http://{}",
+            "crm-server: dashboard http://{0}/  REST http://{0}/api/v1  gRPC http://{1}",
             running.http_addr, running.grpc_addr
         );
         running.wait().await

@@ -238,3 +238,35 @@ pub fn wait_state(addr: &str, id: i64, state: &str, secs: u64) -> Value {
         None
     })
 }
+
+/// Submits a job (JSON text) and returns the stored job; any status but 201 fails the test.
+pub fn submit(addr: &str, body: &str) -> Value {
+    let reply = http(addr, "POST", "/api/v1/jobs", Some(body), None);
+    assert_eq!(
+        reply.status,
+        201,
+        "{}",
+        String::from_utf8_lossy(&reply.body)
+    );
+    reply.json()
+}
+
+/// A loopback port nothing listens on (bound, then freed).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+/// The status of `GET /api/v1/jobs/{id}/recording`.
+pub fn recording_status(addr: &str, id: i64) -> u16 {
+    http(
+        addr,
+        "GET",
+        &format!("/api/v1/jobs/{id}/recording"),
+        None,
+        None,
+    )
+    .status
+}

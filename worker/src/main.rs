@@ -2,6 +2,7 @@
 
 mod commands;
 mod jobs;
+mod record;
 mod service;
 
 use clap::{Parser, Subcommand};
@@ -35,6 +36,8 @@ enum Command {
     Train(commands::train::TrainArgs),
     /// Evaluate a checkpoint over random tasks: success and episode length per objective.
     Eval(commands::eval::EvalArgs),
+    /// Replay one evaluation episode of a checkpoint into a rerun recording or a live viewer.
+    Record(commands::record::RecordArgs),
     /// Train and evaluate every algorithm at one budget; write RESULTS.md and PNG curves.
     Results(commands::results::ResultsArgs),
     /// The grasp-topology selection network: train it or ask it.
@@ -56,6 +59,7 @@ fn main() -> std::process::ExitCode {
         Command::Spec(args) => commands::tasks::run_spec(args),
         Command::Train(args) => commands::train::run(args),
         Command::Eval(args) => commands::eval::run(args),
+        Command::Record(args) => commands::record::run(args),
         Command::Results(args) => commands::results::run(args),
         Command::Topology(command) => commands::topology::run(command),
         Command::Bench(command) => commands::bench::run(command),

@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{PpoConfig, SacConfig};
+use crate::record::RecordSpec;
 
 /// The learners by name.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -83,6 +84,9 @@ pub struct TrainSpec {
     /// SAC settings (crm-sac).
     #[serde(default, skip_serializing_if = "is_default_sac")]
     pub sac: SacConfig,
+    /// Recording for the rerun viewer; off when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record: Option<RecordSpec>,
 }
 
 fn is_default_sac(config: &SacConfig) -> bool {
@@ -109,6 +113,9 @@ pub struct EvalSpec {
     /// task.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub topology: Option<String>,
+    /// Recording of evaluated episodes for the rerun viewer; off when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record: Option<RecordSpec>,
 }
 
 fn default_episodes() -> u64 {
@@ -123,6 +130,7 @@ impl Default for EvalSpec {
             task: None,
             tasks: Vec::new(),
             topology: None,
+            record: None,
         }
     }
 }

@@ -7,7 +7,9 @@
 pub mod catalog;
 pub mod config;
 pub mod jobs;
+pub mod record;
 
 pub use catalog::Catalog;
 pub use config::{ConfigError, PpoConfig, SacConfig};
 pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, Row, TrainSpec};
+pub use record::RecordSpec;

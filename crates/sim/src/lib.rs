@@ -32,6 +32,7 @@ pub mod observation;
 pub mod oracle;
 pub mod scene;
 pub mod spec;
+pub mod view;
 
 pub use benchmark::Benchmark;
 pub use config::{Randomization, SimConfig};

@@ -107,6 +107,7 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
                 ));
             }
             check_task(&spec.task, &spec.tasks, &spec.topology)?;
+            check_record(&spec.record)?;
             spec.config
                 .validate()
                 .map_err(|e| ApiError::invalid(format!("config.{}", e.field), e.message))?;
@@ -133,6 +134,7 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
                 ));
             }
             check_task(&spec.task, &spec.tasks, &spec.topology)?;
+            check_record(&spec.record)?;
             let checkpoint = state.store.checkpoint(checkpoint_id).await.map_err(|_| {
                 ApiError::invalid("checkpoint_id", format!("no checkpoint {checkpoint_id}"))
             })?;
@@ -148,6 +150,15 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
             "kind",
             format!("{other:?}: must be \"train\" or \"eval\""),
         )),
+    }
+}
+
+fn check_record(record: &Option<crm_api::RecordSpec>) -> Result<(), ApiError> {
+    match record {
+        Some(record) => record
+            .validate()
+            .map_err(|e| ApiError::invalid(format!("record.{}", e.field), e.message)),
+        None => Ok(()),
     }
 }
 

@@ -1,8 +1,12 @@
 //! The REST API under `/api/v1` (axum): jobs, runs with their metric series, evaluations,
 //! checkpoints, workers and the task catalog; `GET /healthz`; the OpenAPI document at
-//! `/api/v1/openapi.json`. Errors are JSON `{"error": {"code", "message", "field"}}`.
+//! `/api/v1/openapi.json`; for the dashboard, SVG charts, comparisons, the topology table and
+//! server-sent events. Errors are JSON `{"error": {"code", "message", "field"}}`.
 
+mod compare;
+mod curves;
 mod error;
+mod events;
 mod jobs;
 mod resources;
 
@@ -30,6 +34,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/jobs/{id}", get(jobs::get))
         .route("/jobs/{id}/cancel", post(jobs::cancel))
         .route("/jobs/{id}/rerun", post(jobs::rerun))
+        .route("/jobs/{id}/recording", get(resources::recording))
         .route("/runs", get(resources::runs))
         .route("/runs/{id}", get(resources::run))
         .route("/runs/{id}/metrics", get(resources::run_metrics))
@@ -40,6 +45,10 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/checkpoints/{id}/download", get(resources::download))
         .route("/workers", get(resources::workers))
         .route("/tasks", get(resources::tasks))
+        .route("/charts", get(curves::chart))
+        .route("/compare", get(compare::compare))
+        .route("/topology", get(compare::topology))
+        .route("/events", get(events::events))
         .route("/openapi.json", get(openapi))
         .fallback(not_found)
         .layer(axum::middleware::from_fn_with_state(
@@ -49,6 +58,8 @@ pub fn router(state: Arc<AppState>) -> Router {
     Router::new()
         .nest("/api/v1", api)
         .route("/healthz", get(healthz))
+        .merge(crate::web::routes())
+        .fallback(crate::web::not_found)
         .with_state(state.clone())
         .layer(axum::extract::DefaultBodyLimit::max(
             state.config.max_body_bytes,

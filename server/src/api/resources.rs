@@ -79,14 +79,70 @@ pub async fn run(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> 
         .filter(|e| e.checkpoint_id.is_some_and(|c| ids.contains(&c)))
         .collect();
     let episodes = store.episodes(job.id).await.map_err(err)?;
+    let recording = recording_json(&state, job.id).await?;
     Ok(Json(json!({
         "run": job,
         "metrics": metrics,
         "checkpoints": checkpoints,
         "evaluations": evaluations,
         "episodes": episodes,
+        "recording": recording,
     }))
     .into_response())
+}
+
+/// A job's recording (size, episodes, download path), or null.
+async fn recording_json(state: &AppState, job: i64) -> Result<serde_json::Value, ApiError> {
+    let row = state
+        .store
+        .recording(job)
+        .await
+        .map_err(|e| ApiError::store("recording", e))?;
+    Ok(row.map_or(serde_json::Value::Null, |r| {
+        let mut value = json!(r);
+        value["download"] = json!(format!("/api/v1/jobs/{job}/recording"));
+        value
+    }))
+}
+
+/// `GET /api/v1/jobs/{id}/recording`: the job's rerun recording (`.rrd`), for `rerun FILE`
+/// or `rerun URL`.
+pub async fn recording(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let job = state
+        .store
+        .job(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("job", e))?;
+    let row = state
+        .store
+        .recording(job.id)
+        .await
+        .map_err(|e| ApiError::store("recording", e))?
+        .ok_or_else(|| {
+            ApiError::not_found(
+                "id",
+                format!(
+                    "job {} has no recording (see its \"record\" setting)",
+                    job.id
+                ),
+            )
+        })?;
+    // Only the recorded size: bytes past it belong to an append in progress.
+    let mut bytes = tokio::fs::read(state.store.recording_path(&row))
+        .await
+        .map_err(ApiError::internal)?;
+    bytes.truncate(row.size as usize);
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/octet-stream".to_string()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"job{}.rrd\"", job.id),
+            ),
+        ],
+        Body::from(bytes),
+    )
+        .into_response())
 }
 
 pub async fn run_metrics(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
@@ -113,7 +169,16 @@ pub async fn evaluations(
 
 pub async fn evaluation(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
     let job = job_of_kind(&state, &id, "eval").await?;
-    Ok(Json(job).into_response())
+    let recording = recording_json(&state, job.id).await?;
+    let episodes = state
+        .store
+        .episodes(job.id)
+        .await
+        .map_err(|e| ApiError::store("evaluation", e))?;
+    let mut value = json!(job);
+    value["recording"] = recording;
+    value["episodes"] = json!(episodes);
+    Ok(Json(value).into_response())
 }
 
 pub async fn checkpoints(

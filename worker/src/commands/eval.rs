@@ -36,8 +36,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         task: None,
         tasks: args.task.clone(),
         topology: args.topology.clone(),
+        record: None,
     };
-    let report = evaluate(&args.checkpoint, &spec, &args.env, |_, _, _| true)?;
+    let report = evaluate(&args.checkpoint, &spec, &args.env, None, |_, _, _| true)?;
     if args.json {
         let mut value = serde_json::to_value(&report)?;
         value["checkpoint"] = serde_json::Value::from(args.checkpoint.display().to_string());

@@ -88,9 +88,10 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
             envs: Some(args.envs),
             config: ppo.clone(),
             sac: sac.clone(),
+            record: None,
         };
         let started = Instant::now();
-        let mut trainer = Trainer::new(spec, &args.env, None)?;
+        let mut trainer = Trainer::new(spec, &args.env, None, None)?;
         let mut curve = Vec::new();
         while !trainer.finished() {
             let it = trainer.iterate()?;
@@ -115,8 +116,9 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
             task: None,
             tasks: args.task.clone(),
             topology: None,
+            record: None,
         };
-        let report = evaluate(&checkpoint, &eval, &args.env, |_, _, _| true)?;
+        let report = evaluate(&checkpoint, &eval, &args.env, None, |_, _, _| true)?;
         outcomes.push(Outcome {
             algorithm,
             curve,

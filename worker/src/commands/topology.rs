@@ -17,6 +17,19 @@ pub enum TopologyCommand {
     Train(TrainArgs),
     /// The network's topology probabilities for an object and an objective.
     Predict(PredictArgs),
+    /// The network's probabilities and pick for every task of the benchmark, beside its
+    /// assigned topology (JSON; `models/topology-picks.json` is this for the shipped network
+    /// and feeds the dashboard's topology page).
+    Table(TableArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TableArgs {
+    #[command(flatten)]
+    pub env: EnvArgs,
+    /// A network from `crm topology train`; the shipped one when absent.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -99,12 +112,12 @@ fn labels(benchmark: &Benchmark) -> BTreeMap<(String, Objective), BTreeSet<Topol
 /// `crm topology train --seed 0`), compiled in so every worker has it.
 const SHIPPED: &[u8] = include_bytes!("../../../models/topology.safetensors");
 
-/// The network's highest-probability topology for every task of the benchmark (its object
-/// and objective), from `model` or the shipped network.
-pub fn picks(
+/// The network's probabilities (in `Topology::ALL` order) for every task of the benchmark
+/// (its object and objective), from `model` or the shipped network.
+pub fn probabilities(
     benchmark: &Benchmark,
     model: Option<&std::path::Path>,
-) -> anyhow::Result<Vec<Topology>> {
+) -> anyhow::Result<Vec<Vec<f32>>> {
     let (net, inputs, outputs) = match model {
         Some(path) => TopologyNet::load(path)?,
         None => {
@@ -114,34 +127,78 @@ pub fn picks(
     if inputs != input_names() {
         anyhow::bail!("the topology network was trained on other inputs");
     }
+    let names: Vec<&str> = Topology::ALL.iter().map(|t| t.name()).collect();
+    if outputs != names {
+        anyhow::bail!("the topology network has other outputs than the benchmark's topologies");
+    }
     let rows: Vec<Vec<f32>> = benchmark
         .tasks
         .iter()
-        .map(|task| {
-            let object = benchmark.object_of(task);
-            input(object, task.objective, None)
+        .map(|task| input(benchmark.object_of(task), task.objective, None))
+        .collect();
+    Ok(net.predict(&rows)?)
+}
+
+/// The highest-probability topology of one row of `probabilities`.
+fn best(probabilities: &[f32]) -> Topology {
+    let k = probabilities
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(k, _)| k);
+    Topology::ALL[k.min(Topology::ALL.len() - 1)]
+}
+
+/// The network's highest-probability topology for every task of the benchmark.
+pub fn picks(
+    benchmark: &Benchmark,
+    model: Option<&std::path::Path>,
+) -> anyhow::Result<Vec<Topology>> {
+    Ok(probabilities(benchmark, model)?
+        .iter()
+        .map(|p| best(p))
+        .collect())
+}
+
+/// Every task's assigned topology, the network's pick and its probabilities, as JSON.
+pub fn table(
+    benchmark: &Benchmark,
+    model: Option<&std::path::Path>,
+) -> anyhow::Result<serde_json::Value> {
+    let probabilities = probabilities(benchmark, model)?;
+    let tasks: Vec<serde_json::Value> = benchmark
+        .tasks
+        .iter()
+        .zip(&probabilities)
+        .map(|(task, p)| {
+            serde_json::json!({
+                "task": task.id,
+                "object": task.object,
+                "objective": task.objective.name(),
+                "assigned": task.topology.name(),
+                "picked": best(p).name(),
+                "probabilities": Topology::ALL.iter().zip(p)
+                    .map(|(t, &v)| (t.name().to_string(), (f64::from(v) * 1e4).round() / 1e4))
+                    .collect::<BTreeMap<_, _>>(),
+            })
         })
         .collect();
-    net.predict(&rows)?
-        .iter()
-        .map(|p| {
-            let best = p
-                .iter()
-                .enumerate()
-                .max_by(|a, b| a.1.total_cmp(b.1))
-                .map_or(0, |(k, _)| k);
-            outputs
-                .get(best)
-                .and_then(|name| Topology::from_name(name))
-                .context("the topology network names an unknown topology")
-        })
-        .collect()
+    Ok(serde_json::json!({
+        "model": model.map_or("models/topology.safetensors".to_string(), |m| m.display().to_string()),
+        "topologies": Topology::ALL.iter().map(|t| t.name()).collect::<Vec<_>>(),
+        "tasks": tasks,
+    }))
 }
 
 pub fn run(command: TopologyCommand) -> anyhow::Result<()> {
     match command {
         TopologyCommand::Train(args) => train(args),
         TopologyCommand::Predict(args) => predict(args),
+        TopologyCommand::Table(args) => {
+            let benchmark = args.env.benchmark()?;
+            let table = table(&benchmark, args.model.as_deref())?;
+            emit(&format!("{}\n", serde_json::to_string_pretty(&table)?))
+        }
     }
 }
 
@@ -256,6 +313,19 @@ mod tests {
             right * 10 >= benchmark.tasks.len() * 9,
             "{right} of {}",
             benchmark.tasks.len()
+        );
+    }
+
+    #[test]
+    fn the_checked_in_picks_are_the_shipped_networks() {
+        // `models/topology-picks.json` feeds the dashboard; it must not drift from the network.
+        let shipped: serde_json::Value =
+            serde_json::from_str(include_str!("../../../models/topology-picks.json"))
+                .expect("models/topology-picks.json parses");
+        let fresh = table(&Benchmark::builtin(), None).expect("table");
+        assert_eq!(
+            shipped["tasks"], fresh["tasks"],
+            "regenerate with `crm topology table > models/topology-picks.json`"
         );
     }
 }

@@ -68,8 +68,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         envs: args.envs,
         config,
         sac,
+        record: None,
     };
-    let mut trainer = Trainer::new(spec, &args.env, args.resume.as_deref())?;
+    let mut trainer = Trainer::new(spec, &args.env, args.resume.as_deref(), None)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let metrics_path = args.out.join("metrics.jsonl");

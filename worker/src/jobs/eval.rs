@@ -114,6 +114,7 @@ pub fn evaluate(
     path: &Path,
     spec: &EvalSpec,
     env: &EnvArgs,
+    recorder: Option<crate::record::SharedRecorder>,
     mut progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
 ) -> anyhow::Result<EvalReport> {
     if spec.episodes == 0 {
@@ -125,12 +126,13 @@ pub fn evaluate(
     let machine = policy.machine.clone();
     let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
     super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?.apply(&mut grasp)?;
-    let mut crm_env = crm::CrmEnv::new(machine, grasp, crm::RewardMode::Crm);
+    let recorded = crate::record::Recorded::new(grasp, machine.clone(), recorder);
+    let mut crm_env = crm::CrmEnv::new(machine, recorded, crm::RewardMode::Crm);
     let mut sums: BTreeMap<Objective, (u64, u64, u64)> = BTreeMap::new();
     for k in 0..spec.episodes {
         let seed = spec.seed.wrapping_mul(1_000_003).wrapping_add(k);
         let (mut stage, mut state) = crm_env.reset(seed).context("reset")?;
-        let objective = crm_env.env().objective();
+        let objective = crm_env.env().inner().objective();
         let (success, length) = loop {
             let mask = crm_env.machine().action_mask(stage);
             let action = policy.act(&state, stage, &mask)?;
@@ -148,7 +150,7 @@ pub fn evaluate(
         let machine = crm_env.machine();
         let episode = crm_env.episode();
         let record = EpisodeRecord {
-            task: crm_env.env().task().id.clone(),
+            task: crm_env.env().inner().task().id.clone(),
             success,
             length,
             total_return: episode.total_return(),

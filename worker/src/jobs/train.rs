@@ -16,6 +16,7 @@ use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, Sac, VecEn
 use grasp_sim::GraspEnv;
 
 use crate::commands::EnvArgs;
+use crate::record::{Recorded, SharedRecorder, lock};
 
 /// The learner of a run.
 enum Learner {
@@ -26,7 +27,9 @@ enum Learner {
 /// A run in progress.
 pub struct Trainer {
     spec: TrainSpec,
-    envs: VecEnv<GraspEnv>,
+    envs: VecEnv<Recorded>,
+    /// Records environment 0's episodes and the training series, when the job asks.
+    recorder: Option<SharedRecorder>,
     env_count: usize,
     learner: Learner,
     early_stop: EarlyStop,
@@ -41,8 +44,14 @@ pub struct Trainer {
 }
 
 impl Trainer {
-    /// Sets up the environments and the learner; `init` is a checkpoint to resume from.
-    pub fn new(spec: TrainSpec, env: &EnvArgs, init: Option<&Path>) -> anyhow::Result<Self> {
+    /// Sets up the environments and the learner; `init` is a checkpoint to resume from;
+    /// `recorder` records environment 0's episodes (the others never pay for it).
+    pub fn new(
+        spec: TrainSpec,
+        env: &EnvArgs,
+        init: Option<&Path>,
+        recorder: Option<SharedRecorder>,
+    ) -> anyhow::Result<Self> {
         if spec.steps == 0 {
             bail!("steps must be positive");
         }
@@ -114,12 +123,13 @@ impl Trainer {
             )
         };
         let envs = (0..env_count)
-            .map(|_| {
+            .map(|k| {
                 let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
                 choice.apply(&mut grasp)?;
+                let recorder = if k == 0 { recorder.clone() } else { None };
                 Ok(crm::CrmEnv::new(
                     machine.clone(),
-                    grasp,
+                    Recorded::new(grasp, machine.clone(), recorder),
                     super::reward_mode(spec.algorithm),
                 ))
             })
@@ -132,6 +142,7 @@ impl Trainer {
             early_stop: EarlyStop::new(window, threshold),
             spec,
             envs,
+            recorder,
             env_count,
             learner,
             layout,
@@ -210,7 +221,7 @@ impl Trainer {
             mix[stage] += 1;
         }
         let elapsed = self.started.elapsed().as_secs_f64();
-        Ok(Iteration {
+        let iteration = Iteration {
             iteration: self.iteration,
             steps: self.done,
             wall_s: elapsed,
@@ -236,7 +247,11 @@ impl Trainer {
             approx_kl: f64::from(stats.approx_kl),
             clipfrac: f64::from(stats.clipfrac),
             learning_rate: stats.learning_rate,
-        })
+        };
+        if let Some(recorder) = &self.recorder {
+            lock(recorder).log_iteration(&iteration);
+        }
+        Ok(iteration)
     }
 
     /// Writes the current networks as a checkpoint.

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use crm_proto::pb::coordinator_client::CoordinatorClient;
-use crm_proto::pb::{self, checkpoint_chunk};
+use crm_proto::pb::{self, checkpoint_chunk, recording_chunk};
 use tonic::metadata::{Ascii, MetadataValue};
 use tonic::service::interceptor::InterceptedService;
 use tonic::transport::Channel;
@@ -96,6 +96,35 @@ impl Client {
         }
         tokio::fs::write(path, &bytes).await?;
         Ok(meta)
+    }
+
+    /// Appends recorded episodes (whole `.rrd` streams) to `job`'s recording; returns the
+    /// stored size.
+    pub async fn append_recording(
+        &self,
+        job: i64,
+        bytes: &[u8],
+        episodes: u32,
+    ) -> anyhow::Result<u64> {
+        let meta = pb::RecordingChunk {
+            body: Some(recording_chunk::Body::Meta(pb::RecordingMeta {
+                job_id: job,
+                worker_id: self.worker_id.clone(),
+                size: bytes.len() as u64,
+                episodes,
+            })),
+        };
+        let chunks: Vec<pb::RecordingChunk> = std::iter::once(meta)
+            .chain(bytes.chunks(CHUNK).map(|c| pb::RecordingChunk {
+                body: Some(recording_chunk::Body::Data(c.to_vec())),
+            }))
+            .collect();
+        let reply = self
+            .inner
+            .clone()
+            .append_recording(tokio_stream::iter(chunks))
+            .await?;
+        Ok(reply.into_inner().size)
     }
 
     /// Uploads the checkpoint at `path` for `job`; returns its id.

@@ -17,6 +17,7 @@ use super::{Client, WorkerOptions};
 use crate::commands::EnvArgs;
 use crate::jobs::eval::evaluate;
 use crate::jobs::train::Trainer;
+use crate::record::{Recorder, SharedRecorder, lock};
 
 /// A scratch folder removed on drop.
 struct Scratch(PathBuf);
@@ -156,7 +157,13 @@ fn train(
         None
     };
     let algorithm = spec.algorithm.name();
-    let mut trainer = Trainer::new(spec.clone(), &EnvArgs::default(), init.as_deref())?;
+    let recorder = recorder_for(spec.record.as_ref(), job.job_id);
+    let mut trainer = Trainer::new(
+        spec.clone(),
+        &EnvArgs::default(),
+        init.as_deref(),
+        recorder.clone(),
+    )?;
     let resumed_from = trainer.steps();
     if resumed_from > 0 {
         tracing::info!(
@@ -197,6 +204,7 @@ fn train(
             return Ok(None);
         }
         sent?;
+        ship(link, job.job_id, recorder.as_ref());
         if last_upload.elapsed() >= every {
             upload(&trainer)?;
             last_upload = Instant::now();
@@ -206,6 +214,7 @@ fn train(
         return Ok(None);
     }
     let checkpoint_id = upload(&trainer)?;
+    ship(link, job.job_id, recorder.as_ref());
     Ok(Some(serde_json::json!({
         "steps": trainer.steps(),
         "stopped_early": trainer.stopped_early(),
@@ -222,45 +231,80 @@ fn eval(link: &Link, job: &pb::Job, dir: &Path) -> anyhow::Result<Option<serde_j
         .context("downloading the checkpoint")?;
     let mut last = Instant::now();
     let mut send_failed = None;
-    let report = evaluate(&path, &spec, &EnvArgs::default(), |done, total, record| {
-        let episode = progress::Body::Episode(pb::EpisodeSummary {
-            task: record.task.clone(),
-            success: record.success,
-            length: record.length as u32,
-            episode_return: record.total_return as f32,
-            transitions: record
-                .transitions
-                .iter()
-                .map(|(step, from, to, event, reward)| pb::Transition {
-                    step: *step as u32,
-                    from_stage: from.clone(),
-                    to_stage: to.clone(),
-                    event: event.clone(),
-                    reward: *reward,
-                })
-                .collect(),
-        });
-        let mut sent = link.send(episode);
-        if sent.is_ok() && (done == total || last.elapsed() >= Duration::from_secs(1)) {
-            last = Instant::now();
-            sent = link.send(progress::Body::Eval(pb::EvalProgress {
-                episodes_done: done,
-                episodes_total: total,
-            }));
-        }
-        if let Err(err) = sent {
-            send_failed = Some(err);
-            return false;
-        }
-        !link.stopped()
-    });
+    let recorder = recorder_for(spec.record.as_ref(), job.job_id);
+    let report = evaluate(
+        &path,
+        &spec,
+        &EnvArgs::default(),
+        recorder.clone(),
+        |done, total, record| {
+            ship(link, job.job_id, recorder.as_ref());
+            let episode = progress::Body::Episode(pb::EpisodeSummary {
+                task: record.task.clone(),
+                success: record.success,
+                length: record.length as u32,
+                episode_return: record.total_return as f32,
+                transitions: record
+                    .transitions
+                    .iter()
+                    .map(|(step, from, to, event, reward)| pb::Transition {
+                        step: *step as u32,
+                        from_stage: from.clone(),
+                        to_stage: to.clone(),
+                        event: event.clone(),
+                        reward: *reward,
+                    })
+                    .collect(),
+            });
+            let mut sent = link.send(episode);
+            if sent.is_ok() && (done == total || last.elapsed() >= Duration::from_secs(1)) {
+                last = Instant::now();
+                sent = link.send(progress::Body::Eval(pb::EvalProgress {
+                    episodes_done: done,
+                    episodes_total: total,
+                }));
+            }
+            if let Err(err) = sent {
+                send_failed = Some(err);
+                return false;
+            }
+            !link.stopped()
+        },
+    );
     if link.stopped() {
         return Ok(None);
     }
     if let Some(err) = send_failed {
         return Err(err);
     }
+    ship(link, job.job_id, recorder.as_ref());
     let mut value = serde_json::to_value(report?)?;
     value["checkpoint_id"] = serde_json::Value::from(job.checkpoint_id);
     Ok(Some(value))
+}
+
+/// The job's recorder, when its spec asks for one.
+fn recorder_for(spec: Option<&crm_api::RecordSpec>, job: i64) -> Option<SharedRecorder> {
+    spec.filter(|r| r.enabled())
+        .map(|r| Recorder::new(r, format!("job {job}")).shared())
+}
+
+/// Sends what the recorder holds to the coordinator. A failed append loses those episodes'
+/// recording, never the job.
+fn ship(link: &Link, job: i64, recorder: Option<&SharedRecorder>) {
+    let Some(recorder) = recorder else {
+        return;
+    };
+    let Some((bytes, episodes)) = lock(recorder).take_pending() else {
+        return;
+    };
+    match link
+        .handle
+        .block_on(link.client.append_recording(job, &bytes, episodes))
+    {
+        Ok(size) => tracing::debug!(job, size, episodes, "recording appended"),
+        Err(err) => {
+            tracing::warn!(job, err = %format!("{err:#}"), "a recording append failed; those episodes are not kept")
+        }
+    }
 }

@@ -17,6 +17,7 @@ pub fn up_main(config: ServerConfig, workers: usize, options: WorkerOptions) -> 
         let running = crm_server::start(config).await?;
         let token = running.state.config.token.clone();
         println!("crm-grasp is up");
+        println!("  dashboard  http://{}/", running.http_addr);
         println!(
             "  REST API   http://{}/api/v1  (OpenAPI: /api/v1/openapi.json)",
             running.http_addr

@@ -1,5 +1,5 @@
 //! The sqlite store (sqlx, WAL): workers, jobs and their leases, metric series, episode
-//! summaries and checkpoints. Migrations in `migrations/` are applied when it opens. Every
+//! summaries, checkpoints and rerun recordings (`recordings.rs`). Migrations in `migrations/` are applied when it opens. Every
 //! state change is one statement or one transaction, so a refused request changes nothing.
 
 use std::path::{Path, PathBuf};
@@ -9,6 +9,10 @@ use std::time::Duration;
 use serde::Serialize;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
 use sqlx::{FromRow, SqlitePool};
+
+mod recordings;
+
+pub use recordings::RecordingRow;
 
 /// Milliseconds since the Unix epoch.
 pub fn now_ms() -> i64 {
@@ -129,6 +133,7 @@ pub type Result<T, E = StoreError> = std::result::Result<T, E>;
 pub struct Store {
     pool: SqlitePool,
     checkpoints: PathBuf,
+    recordings: PathBuf,
 }
 
 const JOB_COLUMNS: &str = "id, kind, state, algorithm, task, spec, checkpoint_id, rerun_of, worker_id, attempts, lease_expires_at, progress, steps, steps_per_s, result, error, created_at, started_at, finished_at";
@@ -137,6 +142,7 @@ impl Store {
     /// Opens (creating) `<data_dir>/crm-grasp.sqlite` and applies the migrations.
     pub async fn open(data_dir: &Path) -> Result<Self> {
         std::fs::create_dir_all(data_dir.join("checkpoints"))?;
+        std::fs::create_dir_all(data_dir.join("recordings"))?;
         let path = data_dir.join("crm-grasp.sqlite");
         let options = SqliteConnectOptions::from_str("sqlite:")?
             .filename(&path)
@@ -152,6 +158,7 @@ impl Store {
         Ok(Self {
             pool,
             checkpoints: data_dir.join("checkpoints"),
+            recordings: data_dir.join("recordings"),
         })
     }
 

@@ -1,5 +1,6 @@
 //! The gRPC side (tonic): the `Coordinator` service workers call to register, lease jobs,
-//! heartbeat, stream progress, move checkpoints in chunks and finish jobs. With a token
+//! heartbeat, stream progress, move checkpoints in chunks, append rerun recordings
+//! (`recording.rs`) and finish jobs. With a token
 //! configured, every call must carry `authorization: Bearer <token>`.
 
 use std::pin::Pin;
@@ -14,6 +15,8 @@ use tonic::{Request, Response, Status, Streaming};
 
 use crate::AppState;
 use crate::store::StoreError;
+
+mod recording;
 
 /// Bytes per checkpoint chunk sent to workers.
 pub const CHUNK: usize = 256 * 1024;
@@ -319,6 +322,13 @@ impl Coordinator for CoordinatorService {
         Ok(Response::new(pb::CheckpointReply {
             checkpoint_id: row.id,
         }))
+    }
+
+    async fn append_recording(
+        &self,
+        request: Request<Streaming<pb::RecordingChunk>>,
+    ) -> Result<Response<pb::RecordingReply>, Status> {
+        self.append(request).await
     }
 
     type DownloadCheckpointStream =

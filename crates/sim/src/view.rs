@@ -1,0 +1,159 @@
+//! A read-only view of the current scene for viewers (the worker's rerun recordings): every
+//! collider as a named part with its primitive shape and world pose, the hand-object contacts
+//! with their forces, and the grasp location. Plain arrays, so a viewer needs no rapier types.
+
+use crate::env::GraspEnv;
+
+/// Finger names in the hand's order (thumb first).
+pub const FINGERS: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
+
+/// A collider's primitive, in its own frame. Cylinders run along the local y axis (rapier's
+/// convention); capsules are given by their segment's end points.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PartShape {
+    Cuboid {
+        half_extents: [f32; 3],
+    },
+    Ball {
+        radius: f32,
+    },
+    Capsule {
+        a: [f32; 3],
+        b: [f32; 3],
+        radius: f32,
+    },
+    Cylinder {
+        half_height: f32,
+        radius: f32,
+    },
+    /// A shape the view does not draw (none in the benchmark today).
+    Other,
+}
+
+/// One collider: a path-like name (`table`, `object/part_0`, `hand/palm`,
+/// `hand/index/link_2`), its shape and its world pose (translation; rotation as x, y, z, w).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Part {
+    pub name: String,
+    pub shape: PartShape,
+    pub translation: [f32; 3],
+    pub rotation: [f32; 4],
+}
+
+/// One hand-object contact point: where, and the force on the object (newtons).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactView {
+    pub position: [f32; 3],
+    pub force: [f32; 3],
+}
+
+fn shape_of(shape: &dyn rapier3d::parry::shape::Shape) -> PartShape {
+    if let Some(c) = shape.as_cuboid() {
+        PartShape::Cuboid {
+            half_extents: c.half_extents.into(),
+        }
+    } else if let Some(b) = shape.as_ball() {
+        PartShape::Ball { radius: b.radius }
+    } else if let Some(c) = shape.as_capsule() {
+        PartShape::Capsule {
+            a: c.segment.a.into(),
+            b: c.segment.b.into(),
+            radius: c.radius,
+        }
+    } else if let Some(c) = shape.as_cylinder() {
+        PartShape::Cylinder {
+            half_height: c.half_height,
+            radius: c.radius,
+        }
+    } else {
+        PartShape::Other
+    }
+}
+
+impl GraspEnv {
+    /// Every collider of the current scene, named by what it belongs to; empty before reset.
+    pub fn parts(&self) -> Vec<Part> {
+        let Some(scene) = self.scene() else {
+            return Vec::new();
+        };
+        let hand = &scene.hand;
+        let mut object_parts = 0;
+        let mut parts = Vec::new();
+        for (_, collider) in scene.world.colliders.iter() {
+            let name = match collider.parent() {
+                None => "table".to_string(),
+                Some(body) if body == scene.object => {
+                    object_parts += 1;
+                    format!("object/part_{}", object_parts - 1)
+                }
+                Some(body) if body == hand.palm => "hand/palm".to_string(),
+                Some(body) => hand
+                    .links
+                    .iter()
+                    .enumerate()
+                    .find_map(|(f, links)| {
+                        links
+                            .iter()
+                            .position(|&l| l == body)
+                            .map(|k| format!("hand/{}/link_{k}", FINGERS[f]))
+                    })
+                    .unwrap_or_else(|| "other".to_string()),
+            };
+            let pose = collider.position();
+            parts.push(Part {
+                name,
+                shape: shape_of(collider.shape()),
+                translation: pose.translation.into(),
+                rotation: pose.rotation.to_array(),
+            });
+        }
+        parts
+    }
+
+    /// The hand-object contacts of the last control step.
+    pub fn contacts_view(&self) -> Vec<ContactView> {
+        self.hand_contacts()
+            .points
+            .iter()
+            .map(|p| ContactView {
+                position: p.position.into(),
+                force: p.force.into(),
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::{Benchmark, SimConfig, TaskChoice};
+
+    #[test]
+    fn every_collider_is_named_and_shaped() {
+        let mut env = GraspEnv::new(Arc::new(Benchmark::builtin()), SimConfig::default());
+        assert!(env.parts().is_empty());
+        env.set_task_choice(TaskChoice::Fixed(0)).expect("task");
+        env.reset_seeded(3).expect("reset");
+        let parts = env.parts();
+        let names: Vec<&str> = parts.iter().map(|p| p.name.as_str()).collect();
+        assert!(names.contains(&"table"), "{names:?}");
+        assert!(names.contains(&"hand/palm"), "{names:?}");
+        assert!(names.contains(&"object/part_0"), "{names:?}");
+        for finger in FINGERS {
+            assert!(
+                names
+                    .iter()
+                    .any(|n| n.starts_with(&format!("hand/{finger}/")))
+            );
+        }
+        assert!(!names.contains(&"other"), "{names:?}");
+        assert!(parts.iter().all(|p| p.shape != PartShape::Other));
+        // Rotations are unit quaternions.
+        for part in &parts {
+            let norm: f32 = part.rotation.iter().map(|v| v * v).sum();
+            assert!((norm - 1.0).abs() < 1e-4, "{part:?}");
+        }
+    }
+}

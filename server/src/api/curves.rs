@@ -1,0 +1,347 @@
+//! `GET /api/v1/charts`: training curves of one or several runs as an SVG image, for the
+//! dashboard and for anyone who wants a plot without a notebook. Query: `runs=1,2` (train job
+//! ids), `metric` (see [`Metric`]), `x=steps|episodes|wall`, `smooth` in [0, 0.99], `group=seeds`
+//! (runs whose configuration differs only in the seed become one mean curve with a ±1 std
+//! band), `width`, `height`.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::sync::Arc;
+
+use axum::extract::{Query, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use crm_api::Iteration;
+
+use super::error::ApiError;
+use crate::AppState;
+use crate::charts::{Chart, Series, mean_and_std, render, smooth};
+use crate::store::Job;
+
+/// The curves a chart can show.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Metric {
+    Success,
+    EpisodeLength,
+    Return,
+    /// Intra-stage and transition reward per episode, two curves per run.
+    RewardSplit,
+    /// Share of steps in each CRM stage, one curve per stage.
+    Stages,
+    PolicyLoss,
+    ValueLoss,
+    Entropy,
+    ApproxKl,
+    LearningRate,
+    StepsPerS,
+}
+
+impl Metric {
+    pub const NAMES: [&str; 11] = [
+        "success",
+        "episode_length",
+        "return",
+        "reward_split",
+        "stages",
+        "policy_loss",
+        "value_loss",
+        "entropy",
+        "approx_kl",
+        "learning_rate",
+        "steps_per_s",
+    ];
+    const ALL: [Metric; 11] = [
+        Self::Success,
+        Self::EpisodeLength,
+        Self::Return,
+        Self::RewardSplit,
+        Self::Stages,
+        Self::PolicyLoss,
+        Self::ValueLoss,
+        Self::Entropy,
+        Self::ApproxKl,
+        Self::LearningRate,
+        Self::StepsPerS,
+    ];
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::NAMES
+            .iter()
+            .position(|n| *n == name)
+            .map(|k| Self::ALL[k])
+    }
+
+    fn title(self) -> &'static str {
+        match self {
+            Self::Success => "success rate (last 100 episodes)",
+            Self::EpisodeLength => "mean episode length",
+            Self::Return => "mean episode return",
+            Self::RewardSplit => "intra-stage vs transition reward per episode",
+            Self::Stages => "stage occupancy (share of steps)",
+            Self::PolicyLoss => "policy loss",
+            Self::ValueLoss => "value loss",
+            Self::Entropy => "entropy",
+            Self::ApproxKl => "approximate KL",
+            Self::LearningRate => "learning rate",
+            Self::StepsPerS => "environment steps per second",
+        }
+    }
+
+    fn y_range(self) -> Option<(f64, f64)> {
+        matches!(self, Self::Success | Self::Stages).then_some((0.0, 1.0))
+    }
+
+    /// The curve names within one run and their values at one iteration; per-episode means
+    /// are missing (NaN) where no episode ended.
+    fn parts(self, it: &Iteration, stages: &[String]) -> Vec<(String, f64)> {
+        let one = |v: f64| vec![(String::new(), v)];
+        let ended = |v: f64| if it.episodes > 0 { v } else { f64::NAN };
+        match self {
+            Self::Success => one(it.success_rate_last_100),
+            Self::EpisodeLength => one(ended(it.mean_episode_length)),
+            Self::Return => one(ended(it.mean_return)),
+            Self::RewardSplit => vec![
+                ("intra-stage".into(), ended(it.mean_intra_return)),
+                ("transition".into(), ended(it.mean_transition_return)),
+            ],
+            Self::Stages => stages
+                .iter()
+                .map(|s| (s.clone(), it.stage_mix.get(s).copied().unwrap_or(0.0)))
+                .collect(),
+            Self::PolicyLoss => one(it.policy_loss),
+            Self::ValueLoss => one(it.value_loss),
+            Self::Entropy => one(it.entropy),
+            Self::ApproxKl => one(it.approx_kl),
+            Self::LearningRate => one(it.learning_rate),
+            Self::StepsPerS => one(it.steps_per_s),
+        }
+    }
+}
+
+/// The x axis of a training curve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Axis {
+    Steps,
+    Episodes,
+    Wall,
+}
+
+impl Axis {
+    fn label(self) -> &'static str {
+        match self {
+            Self::Steps => "environment steps",
+            Self::Episodes => "episodes",
+            Self::Wall => "wall time (minutes)",
+        }
+    }
+
+    fn values(self, iterations: &[Iteration]) -> Vec<f64> {
+        let mut episodes = 0.0;
+        iterations
+            .iter()
+            .map(|it| match self {
+                Self::Steps => it.steps as f64,
+                Self::Episodes => {
+                    episodes += it.episodes as f64;
+                    episodes
+                }
+                Self::Wall => it.wall_s / 60.0,
+            })
+            .collect()
+    }
+}
+
+/// Parses `runs=1,2,3`: at most 12 positive ids, each an existing training run.
+pub async fn runs_of(state: &AppState, text: Option<&String>) -> Result<Vec<Job>, ApiError> {
+    let text = text.ok_or_else(|| ApiError::invalid("runs", "give run ids, as runs=1,2"))?;
+    let mut jobs = Vec::new();
+    for part in text.split(',').filter(|p| !p.trim().is_empty()) {
+        let id = part
+            .trim()
+            .parse::<i64>()
+            .ok()
+            .filter(|id| *id > 0)
+            .ok_or_else(|| ApiError::invalid("runs", format!("{part:?} is not a run id")))?;
+        let job = state
+            .store
+            .job(id)
+            .await
+            .map_err(|_| ApiError::not_found("runs", format!("no run {id}")))?;
+        if job.kind != "train" {
+            return Err(ApiError::not_found(
+                "runs",
+                format!("job {id} is not a training run"),
+            ));
+        }
+        if !jobs.iter().any(|j: &Job| j.id == id) {
+            jobs.push(job);
+        }
+    }
+    if jobs.is_empty() || jobs.len() > 12 {
+        return Err(ApiError::invalid("runs", "give between 1 and 12 run ids"));
+    }
+    Ok(jobs)
+}
+
+/// A run's configuration without its seed (and its recording, which changes nothing it
+/// learns): runs with equal keys are seeds of one experiment.
+pub fn config_key(job: &Job) -> String {
+    let mut spec: serde_json::Value = serde_json::from_str(&job.spec).unwrap_or_default();
+    if let Some(map) = spec.as_object_mut() {
+        map.remove("seed");
+        map.remove("record");
+    }
+    format!("{}|{spec}", job.algorithm)
+}
+
+fn number(
+    query: &HashMap<String, String>,
+    key: &str,
+    default: f64,
+    range: (f64, f64),
+) -> Result<f64, ApiError> {
+    let Some(text) = query.get(key) else {
+        return Ok(default);
+    };
+    text.parse::<f64>()
+        .ok()
+        .filter(|v| (range.0..=range.1).contains(v))
+        .ok_or_else(|| ApiError::invalid(key, format!("a number from {} to {}", range.0, range.1)))
+}
+
+pub async fn chart(
+    State(state): State<Arc<AppState>>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    const KNOWN: [&str; 7] = ["runs", "metric", "x", "smooth", "group", "width", "height"];
+    if let Some(key) = query.keys().find(|k| !KNOWN.contains(&k.as_str())) {
+        return Err(ApiError::invalid(key.clone(), "unknown query parameter"));
+    }
+    let metric_name = query.get("metric").map_or("success", String::as_str);
+    let metric = Metric::from_name(metric_name).ok_or_else(|| {
+        ApiError::invalid("metric", format!("one of {}", Metric::NAMES.join(", ")))
+    })?;
+    let axis = match query.get("x").map_or("steps", String::as_str) {
+        "steps" => Axis::Steps,
+        "episodes" => Axis::Episodes,
+        "wall" => Axis::Wall,
+        _ => return Err(ApiError::invalid("x", "one of steps, episodes, wall")),
+    };
+    let weight = number(&query, "smooth", 0.0, (0.0, 0.99))?;
+    let group = match query.get("group").map_or("none", String::as_str) {
+        "none" => false,
+        "seeds" => true,
+        _ => return Err(ApiError::invalid("group", "none or seeds")),
+    };
+    let width = number(&query, "width", 640.0, (200.0, 2000.0))? as u32;
+    let height = number(&query, "height", 320.0, (150.0, 1500.0))? as u32;
+    let jobs = runs_of(&state, query.get("runs")).await?;
+
+    let mut curves = Vec::new();
+    for job in &jobs {
+        let rows = state
+            .store
+            .metrics(job.id)
+            .await
+            .map_err(|e| ApiError::store("run", e))?;
+        let iterations: Vec<Iteration> = rows
+            .iter()
+            .filter_map(|m| serde_json::from_str(&m.data).ok())
+            .collect();
+        curves.push((job, iterations));
+    }
+    let stages: Vec<String> = curves
+        .iter()
+        .flat_map(|(_, its)| its.iter().flat_map(|it| it.stage_mix.keys().cloned()))
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+
+    // Runs, or groups of seeds, in the order first named.
+    let mut groups: Vec<(String, Vec<usize>)> = Vec::new();
+    for (k, (job, _)) in curves.iter().enumerate() {
+        let key = if group {
+            config_key(job)
+        } else {
+            job.id.to_string()
+        };
+        match groups.iter_mut().find(|(g, _)| *g == key) {
+            Some((_, members)) => members.push(k),
+            None => groups.push((key, vec![k])),
+        }
+    }
+    let mut series = Vec::new();
+    for (_, members) in &groups {
+        let first = &curves[members[0]];
+        let name = if members.len() == 1 {
+            format!("run {} {}", first.0.id, first.0.algorithm)
+        } else {
+            let ids: Vec<String> = members
+                .iter()
+                .map(|&m| curves[m].0.id.to_string())
+                .collect();
+            format!(
+                "{} x{} seeds (runs {})",
+                first.0.algorithm,
+                members.len(),
+                ids.join(",")
+            )
+        };
+        let x = axis.values(&first.1);
+        // Per part (curve within a run): each member's smoothed values.
+        let mut parts: BTreeMap<usize, (String, Vec<Vec<f64>>)> = BTreeMap::new();
+        for &m in members {
+            let per_iteration: Vec<Vec<(String, f64)>> = curves[m]
+                .1
+                .iter()
+                .map(|it| metric.parts(it, &stages))
+                .collect();
+            let count = per_iteration.first().map_or(0, Vec::len);
+            for p in 0..count {
+                let values: Vec<f64> = per_iteration.iter().map(|v| v[p].1).collect();
+                let entry = parts
+                    .entry(p)
+                    .or_insert_with(|| (per_iteration[0][p].0.clone(), Vec::new()));
+                entry.1.push(smooth(&values, weight));
+            }
+        }
+        for (_, (part, values)) in parts {
+            let label = if part.is_empty() {
+                name.clone()
+            } else {
+                format!("{name} {part}")
+            };
+            let (mean, std) = mean_and_std(&values);
+            let kept: Vec<((f64, f64), f64)> = x
+                .iter()
+                .copied()
+                .zip(mean)
+                .zip(std)
+                .filter(|((_, y), _)| y.is_finite())
+                .collect();
+            series.push(Series {
+                label,
+                points: kept.iter().map(|(p, _)| *p).collect(),
+                band: (members.len() > 1).then(|| kept.iter().map(|(_, s)| *s).collect()),
+            });
+        }
+    }
+    let svg = render(
+        &Chart {
+            title: metric.title(),
+            x_label: axis.label(),
+            y_label: metric_name,
+            y_range: metric.y_range(),
+            size: (width, height),
+        },
+        &series,
+    )
+    .map_err(ApiError::internal)?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, "image/svg+xml"),
+            (header::CACHE_CONTROL, "no-store"),
+        ],
+        svg,
+    )
+        .into_response())
+}

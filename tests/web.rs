@@ -1,0 +1,112 @@
+//! The dashboard in real headless Chromium: the real coordinator and a real worker on loopback
+//! ports with a temporary database, seeded through the REST API with three short training runs
+//! (two seeds of one configuration and another algorithm), their evaluations and evaluations
+//! with forced topologies; then `web/tests/dashboard.mjs` (playwright-core driving Debian's
+//! `/usr/bin/chromium`) loads every page, submits a job through the form and compares runs.
+//!
+//! Needs `node`, `npm ci --prefix web` and Chromium (`.ci/run` installs them). Set
+//! `CRM_SKIP_BROWSER=1` to skip on a machine without them; `CRM_SCREENSHOTS=DIR` keeps a PNG
+//! of each page.
+
+mod support;
+
+use std::path::Path;
+use std::process::Command;
+
+use serde_json::{Value, json};
+use support::{TempDir, get, start_server, start_worker, wait_state};
+
+fn submit(addr: &str, body: &Value) -> i64 {
+    support::submit(addr, &body.to_string())["id"]
+        .as_i64()
+        .expect("job id")
+}
+
+fn train(algorithm: &str, seed: u64) -> Value {
+    let mut body = json!({
+        "kind": "train", "algorithm": algorithm, "task": "mouse-press", "steps": 3072,
+        "seed": seed, "envs": 2, "config": {"rollout_steps": 1024, "learning_rate": 0.0003},
+    });
+    if seed == 0 && algorithm == "crm-ppo" {
+        body["record"] = json!({"every": 1, "max_episodes": 2});
+    }
+    body
+}
+
+#[test]
+fn the_dashboard_works_in_chromium() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let web = root.join("web");
+    if std::env::var("CRM_SKIP_BROWSER").is_ok_and(|v| v == "1") {
+        eprintln!("CRM_SKIP_BROWSER=1: the browser test is skipped");
+        return;
+    }
+    assert!(
+        web.join("node_modules/playwright-core").exists(),
+        "run `npm ci --prefix web` first (and `apt-get install chromium`), or set CRM_SKIP_BROWSER=1"
+    );
+
+    let data = TempDir::new("web");
+    let server = start_server(&data.0, &[]);
+    let addr = server.http.clone();
+    let mut worker = start_worker(&format!("http://{}", server.grpc), &[]);
+
+    let runs = [
+        submit(&addr, &train("crm-ppo", 0)),
+        submit(&addr, &train("crm-ppo", 1)),
+        submit(&addr, &train("lppo", 0)),
+    ];
+    let mut checkpoints = Vec::new();
+    for &id in &runs {
+        let done = wait_state(&addr, id, "succeeded", 300);
+        checkpoints.push(
+            done["result"]["checkpoint_id"]
+                .as_i64()
+                .expect("checkpoint"),
+        );
+    }
+    let catalog = get(&addr, "/api/v1/tasks");
+    let topologies: Vec<String> = catalog["topologies"]
+        .as_array()
+        .expect("topologies")
+        .iter()
+        .filter_map(|t| t.as_str().map(String::from))
+        .collect();
+    let mut evals = Vec::new();
+    for &checkpoint in &checkpoints {
+        evals.push(submit(
+            &addr,
+            &json!({"kind": "eval", "checkpoint_id": checkpoint, "episodes": 6,
+                    "tasks": ["mouse-press", "valve-twist"]}),
+        ));
+    }
+    for topology in &topologies[..2] {
+        evals.push(submit(
+            &addr,
+            &json!({"kind": "eval", "checkpoint_id": checkpoints[0], "episodes": 3,
+                    "task": "mouse-press", "topology": topology}),
+        ));
+    }
+    for &id in &evals {
+        wait_state(&addr, id, "succeeded", 300);
+    }
+    // Without a worker, the job the browser submits stays queued until it cancels it.
+    let _ = worker.0.kill();
+    let _ = worker.0.wait();
+
+    let out = Command::new("node")
+        .arg(web.join("tests/dashboard.mjs"))
+        .current_dir(&web)
+        .env("CRM_BASE", format!("http://{addr}"))
+        .env("CRM_SEED", json!({"runs": runs}).to_string())
+        .output()
+        .expect("run node (is Node.js installed?)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "browser checks failed:\n{stdout}\n{stderr}"
+    );
+    assert!(stdout.contains("7 of 7 browser checks passed"), "{stdout}");
+    println!("{stdout}");
+}

@@ -1,0 +1,160 @@
+// A run: live training curves with smoothing and x-axis controls, its checkpoints (download,
+// evaluate), its evaluations and its recent episodes.
+import {
+  ApiError, asObject, badge, chartControls, chartSettings, drawChart, duration, el, errorBox, fmtNum,
+  fmtTime, getJson, notFound, onChange, send, tasksOf,
+} from './api.js';
+
+const METRICS = ['success', 'episode_length', 'return', 'reward_split', 'stages', 'entropy', 'value_loss', 'learning_rate'];
+
+export async function renderRun(main, idText) {
+  const id = Number(idText);
+  if (!Number.isInteger(id) || id < 1) return notFound(main, `"${idText}" is not a run id.`);
+  let data;
+  try {
+    data = await getJson(`/api/v1/runs/${id}`);
+  } catch (err) {
+    if (err instanceof ApiError && err.status === 404) return notFound(main, `Run ${id} does not exist (${err.message}).`);
+    return main.replaceChildren(errorBox(err));
+  }
+  document.title = `Run ${id} · crm-grasp`;
+  const header = el('section', { class: 'run-header' });
+  const figures = METRICS.map((metric) => el('figure', { class: 'chart', 'data-metric': metric }));
+  const message = el('div', { class: 'message', role: 'status' });
+  const checkpoints = el('tbody');
+  const evaluations = el('div');
+  const episodes = el('div');
+  const recording = el('div', { id: 'recording' });
+  const episodesInput = el('input', { type: 'text', inputmode: 'numeric', value: '100', name: 'eval-episodes', size: 6 });
+
+  const drawCharts = () => {
+    const { smooth, x } = chartSettings();
+    figures.forEach((figure) => drawChart(figure, {
+      runs: String(id), metric: figure.dataset.metric, smooth, x, width: 560, height: 300,
+    }));
+  };
+  main.replaceChildren(
+    header,
+    el('div', { class: 'toolbar' }, chartControls(drawCharts), el('span', { class: 'spacer' }),
+      el('a', { href: `/compare?runs=${id}`, class: 'button' }, 'Compare with other runs')),
+    el('div', { class: 'charts' }, figures),
+    message,
+    el('h2', {}, 'Checkpoints'),
+    el('p', { class: 'muted' }, 'Evaluate with ', episodesInput, ' episodes; the result appears under Evaluations.'),
+    el('table', { id: 'checkpoints' }, el('thead', {}, el('tr', {},
+      ['id', 'steps', 'size', 'saved', ''].map((h) => el('th', {}, h)))), checkpoints),
+    el('h2', {}, 'Evaluations'), evaluations,
+    el('h2', {}, 'Rerun recording'), recording,
+    el('h2', {}, 'Episodes and their stage transitions'), episodes);
+
+  async function evaluate(checkpoint) {
+    const text = episodesInput.value.trim();
+    const count = /^\d+$/.test(text) ? Number(text) : text;
+    try {
+      const job = await send('POST', '/api/v1/jobs', { kind: 'eval', checkpoint_id: checkpoint.id, episodes: count });
+      message.replaceChildren(el('div', { class: 'ok' }, `Evaluation job ${job.id} queued for checkpoint ${checkpoint.id}.`));
+    } catch (err) {
+      message.replaceChildren(errorBox(err.field ? new Error(`${err.field}: ${err.message}`) : err));
+    }
+  }
+
+  function show(d) {
+    const run = d.run;
+    const spec = asObject(run.spec);
+    const last = d.metrics.length ? asObject(d.metrics[d.metrics.length - 1].data) : null;
+    header.replaceChildren(
+      el('h1', {}, `Run #${run.id} `, el('small', {}, run.algorithm), ' ', badge(run.state)),
+      el('dl', { class: 'facts' },
+        ...fact('tasks', tasksOf(run)), ...fact('topology', spec.topology || 'task'), ...fact('seed', spec.seed ?? 0),
+        ...fact('steps', `${run.steps.toLocaleString()} of ${(spec.steps || 0).toLocaleString()} (${Math.round(100 * run.progress)}%)`),
+        ...fact('steps/s', run.steps_per_s ? Math.round(run.steps_per_s) : ''),
+        ...fact('success (last 100)', last ? fmtNum(last.success_rate_last_100) : ''),
+        ...fact('started', fmtTime(run.started_at)), ...fact('duration', duration(run)),
+        ...fact('attempts', run.attempts), ...(run.rerun_of ? fact('re-run of', el('a', { href: `/runs/${run.rerun_of}` }, `#${run.rerun_of}`)) : []),
+        ...(run.error ? fact('error', el('span', { class: 'bad' }, run.error)) : [])),
+      el('details', {}, el('summary', {}, 'configuration'), el('pre', {}, JSON.stringify(spec, null, 2))));
+    checkpoints.replaceChildren(...d.checkpoints.map((c) => el('tr', { 'data-checkpoint': c.id },
+      el('td', {}, c.id), el('td', {}, c.steps.toLocaleString()), el('td', {}, `${Math.round(c.size / 1024)} KiB`),
+      el('td', {}, fmtTime(c.created_at)),
+      el('td', {}, el('a', { href: `/api/v1/checkpoints/${c.id}/download`, class: 'button small', download: true }, 'Download'), ' ',
+        el('button', { type: 'button', class: 'small', onclick: () => evaluate(c) }, 'Evaluate')))));
+    if (!d.checkpoints.length) checkpoints.append(el('tr', {}, el('td', { colspan: 5, class: 'muted' }, 'No checkpoint yet.')));
+    evaluations.replaceChildren(evaluationTable(d.evaluations));
+    recording.replaceChildren(...recordingInfo(run, d.recording));
+    showEpisodes(d);
+  }
+
+  // Training runs keep few episode summaries; evaluations keep each episode's transitions.
+  async function showEpisodes(d) {
+    const finished = d.evaluations.find((e) => e.state === 'succeeded');
+    if (d.episodes.length || !finished) {
+      episodes.replaceChildren(episodeList(d.episodes));
+      return;
+    }
+    try {
+      const evaluation = await getJson(`/api/v1/evaluations/${finished.id}`);
+      episodes.replaceChildren(el('p', { class: 'muted' }, `From evaluation #${finished.id}.`), episodeList(evaluation.episodes));
+    } catch (err) {
+      episodes.replaceChildren(errorBox(err));
+    }
+  }
+
+  show(data);
+  drawCharts();
+  onChange(async () => {
+    try {
+      const d = await getJson(`/api/v1/runs/${id}`);
+      const moved = d.metrics.length !== data.metrics.length || d.run.state !== data.run.state;
+      data = d;
+      show(d);
+      if (moved) drawCharts();
+    } catch { /* the next change retries */ }
+  });
+}
+
+function recordingInfo(run, rec) {
+  if (!rec) {
+    return [el('p', { class: 'muted' }, 'This run records nothing. Submit a job with "record every N episodes" set (or ',
+      el('code', {}, '"record": {"every": 10}'), ' in the API), or replay a checkpoint: ',
+      el('code', {}, 'crm record --checkpoint FILE --out episode.rrd'), '.')];
+  }
+  const url = new URL(rec.download, window.location.href).href;
+  return [el('p', {},
+    `${rec.episodes} episode${rec.episodes === 1 ? '' : 's'}, ${(rec.size / 1048576).toFixed(1)} MiB. `,
+    el('a', { href: rec.download, class: 'button small', download: `job${run.id}.rrd` }, 'Download .rrd'),
+    ' or open it in the viewer (', el('code', {}, 'pip install rerun-sdk==0.36.3'), '): ',
+    el('code', { class: 'command' }, `rerun ${url}`))];
+}
+
+function fact(name, value) {
+  return [el('dt', {}, name), el('dd', {}, value)];
+}
+
+function evaluationTable(evaluations) {
+  if (!evaluations.length) return el('p', { class: 'muted' }, 'No evaluation yet: press Evaluate on a checkpoint.');
+  const reports = evaluations.map((e) => (e.result && e.result.per_objective ? e.result : null));
+  const objectives = [...new Set(reports.flatMap((r) => (r ? Object.keys(r.per_objective) : [])))].sort();
+  return el('table', { id: 'evaluations' },
+    el('thead', {}, el('tr', {}, ['id', 'checkpoint', 'state', 'tasks', 'topology', 'episodes', 'overall', ...objectives].map((h) => el('th', {}, h)))),
+    el('tbody', {}, evaluations.map((e, k) => {
+      const r = reports[k];
+      const spec = asObject(e.spec);
+      return el('tr', {}, el('td', {}, e.id), el('td', {}, e.checkpoint_id), el('td', {}, badge(e.state)),
+        el('td', { class: 'tasks' }, tasksOf(e)), el('td', {}, spec.topology || 'task'),
+        el('td', {}, r ? r.episodes : ''), el('td', {}, r ? fmtNum(r.success_rate) : ''),
+        objectives.map((o) => el('td', {}, r && r.per_objective[o] ? fmtNum(r.per_objective[o].success_rate) : '')));
+    })));
+}
+
+function episodeList(episodes) {
+  if (!episodes || !episodes.length) return el('p', { class: 'muted' }, 'No episode summaries yet.');
+  const rows = episodes.slice(-20).reverse().map((e) => {
+    const d = e || {};
+    const history = (d.transitions || d.history || []).map((t) => `${t.from}→${t.to} (${t.event}, ${fmtNum(t.reward, 0)})`).join(', ');
+    return el('tr', {}, el('td', {}, d.task || ''), el('td', {}, d.success === undefined ? '' : (d.success ? 'yes' : 'no')),
+      el('td', {}, d.length ?? ''), el('td', {}, fmtNum(d.return, 1)), el('td', { class: 'history' }, history));
+  });
+  return el('table', { id: 'episodes' },
+    el('thead', {}, el('tr', {}, ['task', 'success', 'length', 'return', 'stage transitions (event, reward)'].map((h) => el('th', {}, h)))),
+    el('tbody', {}, rows));
+}

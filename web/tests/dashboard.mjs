@@ -1,0 +1,232 @@
+// Browser tests of the dashboard in real headless Chromium (Debian's, driven by
+// playwright-core). Started by `tests/web.rs`, which runs the real coordinator and a worker,
+// seeds runs and evaluations through the API and passes what it made in the environment:
+//   CRM_BASE         the coordinator's URL (http://127.0.0.1:PORT)
+//   CRM_SEED         JSON: {"runs": [a, b, c], "group": [a, b]} (a and b: two seeds of one config)
+//   CRM_SCREENSHOTS  optional folder for a PNG of each page
+// Exits non-zero with the failed check's message.
+import assert from 'node:assert/strict';
+import { mkdirSync } from 'node:fs';
+import { chromium } from 'playwright-core';
+
+const base = process.env.CRM_BASE;
+const seed = JSON.parse(process.env.CRM_SEED || '{}');
+const shots = process.env.CRM_SCREENSHOTS;
+const [runA, runB, runC] = seed.runs || [];
+assert.ok(base && runA && runB && runC, 'CRM_BASE and CRM_SEED must be set (see tests/web.rs)');
+if (shots) mkdirSync(shots, { recursive: true });
+
+const browser = await chromium.launch({
+  executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
+  args: ['--no-sandbox', '--disable-gpu', '--disable-dev-shm-usage'],
+});
+const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+const problems = [];
+page.on('pageerror', (err) => problems.push(`page error: ${err.message}`));
+// Refused requests (the form's 400s, the not-found page's 404s) are expected; scripts'
+// errors are not.
+page.on('console', (msg) => {
+  if (msg.type() === 'error' && !msg.text().startsWith('Failed to load resource')) problems.push(`console: ${msg.text()}`);
+});
+
+async function shot(name) {
+  if (shots) await page.screenshot({ path: `${shots}/${name}.png`, fullPage: true });
+}
+
+async function api(path) {
+  const response = await fetch(`${base}${path}`);
+  assert.equal(response.status, 200, `${path}: ${response.status}`);
+  return response.json();
+}
+
+/** Waits until every chart in the page has drawn an SVG with at least one line. */
+async function chartsDrawn(count) {
+  await page.waitForFunction((n) => {
+    const figures = [...document.querySelectorAll('figure.chart')];
+    return figures.length >= n && figures.every((f) => f.querySelector('svg polyline'));
+  }, count, { timeout: 20000 });
+}
+
+const checks = [];
+function check(name, body) { checks.push([name, body]); }
+
+check('jobs list shows the seeded runs live', async () => {
+  await page.goto(`${base}/`);
+  await page.waitForSelector(`#jobs tr[data-job="${runA}"]`);
+  for (const id of [runA, runB, runC]) {
+    const state = await page.getAttribute(`#jobs tr[data-job="${id}"]`, 'data-state');
+    assert.equal(state, 'succeeded', `run ${id}`);
+  }
+  await page.waitForFunction(() => document.getElementById('live').textContent === 'live');
+  const text = await page.textContent(`#jobs tr[data-job="${runC}"]`);
+  assert.match(text, /lppo/);
+  assert.match(text, /mouse-press/);
+  await shot('jobs');
+});
+
+check('filters narrow the list', async () => {
+  await page.selectOption('select[name="filter-algorithm"]', 'lppo');
+  await page.waitForFunction(() => [...document.querySelectorAll('#jobs tbody tr[data-job]')]
+    .every((tr) => tr.children[4].textContent === 'lppo'));
+  const rows = await page.$$eval('#jobs tbody tr[data-job]', (trs) => trs.map((tr) => tr.dataset.job));
+  assert.ok(rows.includes(String(runC)));
+  assert.ok(!rows.includes(String(runA)));
+  assert.match(page.url(), /algorithm=lppo/);
+  await page.selectOption('select[name="filter-algorithm"]', '');
+  await page.waitForSelector(`#jobs tr[data-job="${runA}"]`);
+});
+
+check('the form shows API errors next to the field, then queues a job that appears', async () => {
+  await page.fill('#f-steps', '-5');
+  await page.click('#submit-job button[type=submit]');
+  await page.waitForSelector('[data-error-for="steps"]:not(:empty)');
+  assert.match(await page.textContent('[data-error-for="steps"]'), /steps/);
+  assert.ok(await page.$('#f-steps.invalid'));
+  await shot('jobs-form-error');
+
+  await page.fill('#f-steps', '3000');
+  await page.fill('#f-config', '{"gamma": 2}');
+  await page.click('#submit-job button[type=submit]');
+  await page.waitForFunction(() => /config\.gamma/.test(document.querySelector('[data-error-for="config"]').textContent));
+  assert.equal(await page.textContent('[data-error-for="steps"]'), '');
+
+  await page.fill('#f-config', '{"learning_rate": 0.0003}');
+  await page.fill('#f-record_connect', 'not-a-viewer');
+  await page.click('#submit-job button[type=submit]');
+  await page.waitForFunction(() => /record\.connect/.test(document.querySelector('[data-error-for="record_connect"]').textContent));
+  await page.fill('#f-record_connect', '');
+  await page.fill('#f-record_every', '5');
+  await page.selectOption('#f-tasks', ['valve-twist']);
+  await page.click('#submit-job button[type=submit]');
+  const ok = await page.waitForSelector('.message .ok');
+  const id = Number((await ok.textContent()).match(/Job (\d+) queued/)[1]);
+  const row = await page.waitForSelector(`#jobs tr[data-job="${id}"]`);
+  assert.equal(await row.getAttribute('data-state'), 'queued');
+  assert.match(await row.textContent(), /valve-twist/);
+  const stored = await api(`/api/v1/jobs/${id}`);
+  assert.equal(stored.spec.steps, 3000);
+  assert.deepEqual(stored.spec.tasks, ['valve-twist']);
+  assert.equal(stored.spec.record.every, 5);
+
+  // Cancel it from its row; the list follows.
+  await row.$('button:has-text("Cancel")').then((b) => b.click());
+  await page.waitForSelector(`#jobs tr[data-job="${id}"][data-state="cancelled"]`);
+});
+
+check('a run page draws its curves, lists checkpoints and evaluations', async () => {
+  await page.goto(`${base}/runs/${runA}`);
+  await page.waitForSelector('h1:has-text("Run #")');
+  await chartsDrawn(8);
+  const rows = await page.$$('#checkpoints tr[data-checkpoint]');
+  assert.ok(rows.length >= 1, 'a checkpoint row');
+  const href = await page.getAttribute('#checkpoints tr[data-checkpoint] a', 'href');
+  const download = await fetch(`${base}${href}`);
+  assert.equal(download.status, 200);
+  assert.ok((await page.$$('#evaluations tbody tr')).length >= 1, 'an evaluation row');
+  // Run a records every episode: the section offers the file and the viewer command.
+  await page.waitForSelector('#recording a[href$="/recording"]');
+  assert.match(await page.textContent('#recording'), new RegExp(`rerun http://.*/api/v1/jobs/${runA}/recording`));
+  // The episode table shows an evaluation's stage transitions.
+  assert.ok((await page.$$('#episodes tbody tr')).length >= 1, 'episode rows');
+  // Another x axis redraws the charts.
+  await page.selectOption('select[name="x"]', 'episodes');
+  await page.waitForFunction(() => document.querySelector('figure[data-metric="success"] svg')?.textContent.includes('episodes'));
+  await chartsDrawn(8);
+  await page.selectOption('select[name="x"]', 'steps');
+  await chartsDrawn(8);
+  await shot('run');
+});
+
+check('a run that does not exist shows a not-found page with status 404', async () => {
+  const response = await page.goto(`${base}/runs/987654`);
+  assert.equal(response.status(), 404);
+  await page.waitForSelector('.not-found h1');
+  assert.match(await page.textContent('.not-found'), /Run 987654 does not exist/);
+  const other = await page.goto(`${base}/no/such/page`);
+  assert.equal(other.status(), 404);
+  await page.waitForSelector('.not-found');
+  await shot('not-found');
+});
+
+check('comparing runs overlays curves with a seed band, Table I and the config diff', async () => {
+  await page.goto(`${base}/compare?runs=${runA},${runB},${runC}`);
+  await page.waitForSelector('#table-one');
+  await chartsDrawn(4);
+  // Runs a and b share a configuration: one mean curve with a band.
+  const band = await page.$$eval('figure[data-metric="success"] svg polygon', (p) => p.length);
+  assert.ok(band >= 1, 'a seed band');
+  const legend = await page.textContent('figure[data-metric="success"] svg');
+  assert.match(legend, /x2 seeds/);
+
+  // Table cells equal the API's numbers; the best cell of each row is bold.
+  const data = await api(`/api/v1/compare?runs=${runA},${runB},${runC}`);
+  for (const column of data.table.columns) {
+    const cell = await page.textContent(`#table-one tr[data-objective="overall"] td[data-run="${column.run}"][data-kind="success"]`);
+    assert.equal(cell, column.report.success_rate.toFixed(2), `overall success of run ${column.run}`);
+    const press = await page.textContent(`#table-one tr[data-objective="press"] td[data-run="${column.run}"][data-kind="success"]`);
+    assert.equal(press, column.report.per_objective.press.success_rate.toFixed(2));
+  }
+  const best = await page.$$eval('#table-one tr[data-objective="overall"] td.best[data-kind="success"]', (tds) => tds.map((td) => td.dataset.run));
+  const expected = data.table.best.overall.success.map((k) => String(data.table.columns[k].run));
+  assert.deepEqual(best, expected);
+  const weight = await page.$eval('#table-one td.best', (td) => getComputedStyle(td).fontWeight);
+  assert.equal(weight, '700');
+
+  // The diff shows only differing keys by default: the seed and the algorithm differ.
+  const keys = await page.$$eval('#config-diff tbody tr', (trs) => trs.map((tr) => [tr.dataset.key, tr.className]));
+  const differing = keys.map(([k]) => k);
+  assert.ok(differing.includes('seed'), differing.join(','));
+  assert.ok(differing.includes('algorithm'), differing.join(','));
+  assert.ok(keys.every(([, c]) => c === 'differs'));
+  await page.uncheck('input[name="only-differences"]');
+  const all = await page.$$eval('#config-diff tbody tr', (trs) => trs.length);
+  assert.ok(all > differing.length, 'equal keys appear when asked');
+  await shot('compare');
+
+  // Without grouping every run is its own curve.
+  await page.uncheck('input[name="group"]');
+  await page.waitForFunction(() => !/x2 seeds/.test(document.querySelector('figure[data-metric="success"] svg')?.textContent || 'x2 seeds'));
+  assert.match(page.url(), /group=none/);
+});
+
+check('the topology page shows picks per task and a heat map of forced topologies', async () => {
+  await page.goto(`${base}/topology`);
+  await page.waitForSelector('#topology-tasks tbody tr');
+  const data = await api('/api/v1/topology');
+  assert.equal((await page.$$('#topology-tasks tbody tr')).length, data.tasks.length);
+  assert.equal(data.tasks.length, 26);
+  assert.match(await page.textContent('.summary'), new RegExp(`${data.picked_as_assigned} of 26`));
+  const filled = await page.$$eval('#heatmap td[data-cell]:not(.empty)', (tds) => tds.map((td) => td.dataset.cell));
+  const expected = data.results.map((r) => `${r.objective}|${r.topology}`);
+  assert.deepEqual(filled.sort(), expected.sort());
+  assert.ok(filled.length >= 2, 'forced-topology evaluations fill cells');
+  // One checkpoint's evaluations only: the cells follow the API's for that checkpoint.
+  const [first] = data.checkpoints;
+  await page.selectOption('select[name="checkpoint"]', String(first.checkpoint_id));
+  const one = await api(`/api/v1/topology?checkpoint_id=${first.checkpoint_id}`);
+  const cellsOf = (d) => d.results.map((r) => `${r.objective}|${r.topology}|${r.success_rate.toFixed(2)}`).sort();
+  await page.waitForFunction((n) => document.querySelectorAll('#heatmap td[data-cell]:not(.empty)').length === n, one.results.length);
+  const shown = await page.$$eval('#heatmap td[data-cell]:not(.empty)', (tds) => tds.map((td) => `${td.dataset.cell}|${td.firstChild.textContent}`));
+  assert.deepEqual(shown.sort(), cellsOf(one));
+  assert.match(page.url(), new RegExp(`checkpoint_id=${first.checkpoint_id}`));
+  await shot('topology');
+});
+
+let failed = 0;
+for (const [name, body] of checks) {
+  try {
+    await body();
+    console.log(`ok - ${name}`);
+  } catch (err) {
+    failed += 1;
+    console.log(`FAILED - ${name}\n  ${err.stack || err}`);
+    await page.screenshot({ path: `${shots || '/tmp'}/failed-${failed}.png`, fullPage: true }).catch(() => {});
+  }
+}
+if (problems.length) {
+  failed += 1;
+  console.log(`FAILED - the pages logged errors:\n  ${problems.join('\n  ')}`);
+}
+await browser.close();
+console.log(`${checks.length - failed} of ${checks.length} browser checks passed`);
+process.exit(failed ? 1 : 0);
