@@ -329,3 +329,73 @@ fn results_writes_table_i_and_png_curves() {
     assert!(stderr.contains("must be positive"), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn behaviour_cloning_of_the_oracle_warms_up_a_ppo_policy() {
+    let dir = std::env::temp_dir().join(format!("crm-cli-bc-{}", std::process::id()));
+    let out = dir.to_string_lossy().to_string();
+    let (code, _, stderr) = crm(&[
+        "train",
+        "--algo",
+        "crm-ppo",
+        "--task",
+        "mouse-press",
+        "--steps",
+        "64",
+        "--envs",
+        "1",
+        "--bc-episodes",
+        "4",
+        "--bc-epochs",
+        "40",
+        "--out",
+        &out,
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    // The oracle presses reliably: its successful episodes are the demonstrations.
+    assert!(
+        stderr.contains("behaviour cloning: 4 of 4 oracle episodes succeeded"),
+        "{stderr}"
+    );
+    assert!(dir.join("crm-ppo.safetensors").exists());
+    // The clone acts like the oracle on the task it saw.
+    let checkpoint = dir
+        .join("crm-ppo.safetensors")
+        .to_string_lossy()
+        .to_string();
+    let (code, stdout, stderr) = crm(&[
+        "eval",
+        "--checkpoint",
+        &checkpoint,
+        "--task",
+        "mouse-press",
+        "--episodes",
+        "5",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+    assert!(
+        report["success_rate"].as_f64().expect("rate") > 0.0,
+        "{report}"
+    );
+    // The oracle acts in the grasping machine; SAC has no cloning.
+    for algo in ["ppo", "crm-sac"] {
+        let (code, _, stderr) = crm(&[
+            "train",
+            "--algo",
+            algo,
+            "--task",
+            "mouse-press",
+            "--steps",
+            "64",
+            "--bc-episodes",
+            "2",
+            "--out",
+            &out,
+        ]);
+        assert_eq!(code, 2, "{algo}: {stderr}");
+        assert!(stderr.contains("--bc-episodes"), "{stderr}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -54,6 +54,14 @@ impl Ppo {
         })
     }
 
+    pub(crate) fn optimizer_mut(&mut self) -> &mut AdamW {
+        &mut self.optimizer
+    }
+
+    pub(crate) fn noise_mut(&mut self) -> &mut Noise {
+        &mut self.noise
+    }
+
     /// Copies the weights of `other` (same layout and widths) into this learner's networks,
     /// keeping the optimizer bound to them: how a run resumes from a checkpoint.
     pub fn load_weights(&mut self, other: &ActorCritic) -> Result<()> {

@@ -47,6 +47,15 @@ pub struct TrainArgs {
     /// Also write a checkpoint every this many iterations (0: only at the end).
     #[arg(long, default_value_t = 0)]
     pub checkpoint_every: u64,
+    /// Before PPO, clone the scripted oracle's successful episodes out of this many (0: off).
+    #[arg(long, default_value_t = 0)]
+    pub bc_episodes: u64,
+    /// Passes over the oracle's demonstrations.
+    #[arg(long, default_value_t = 20)]
+    pub bc_epochs: usize,
+    /// Learning rate of behaviour cloning.
+    #[arg(long, default_value_t = 1e-3)]
+    pub bc_learning_rate: f64,
 }
 
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
@@ -70,7 +79,40 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         sac,
         record: None,
     };
-    let mut trainer = Trainer::new(spec, &args.env, args.resume.as_deref(), None)?;
+    let mut trainer = Trainer::new(spec.clone(), &args.env, args.resume.as_deref(), None)?;
+    if args.bc_episodes > 0 {
+        let started = std::time::Instant::now();
+        let benchmark = args.env.benchmark()?;
+        let machine = match args.algo {
+            Algorithm::Ppo => {
+                bail!("--bc-episodes: the oracle acts in the grasping machine, not the flat one")
+            }
+            Algorithm::CrmSac => {
+                bail!(
+                    "--bc-episodes: behaviour cloning is for the PPO learners (crm-ppo, ippo, lppo)"
+                )
+            }
+            _ => args.env.machine()?,
+        };
+        let choice =
+            crate::jobs::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
+        let (demos, successes) = crate::jobs::demos::oracle_demos(
+            &benchmark,
+            &args.env.config(),
+            &machine,
+            &choice,
+            args.bc_episodes,
+            args.seed.wrapping_mul(7_919).wrapping_add(1 << 32),
+        )?;
+        let loss = trainer.imitate(&demos, args.bc_epochs, args.bc_learning_rate)?;
+        eprintln!(
+            "behaviour cloning: {successes} of {} oracle episodes succeeded, {} steps, {} epochs, loss {loss:.4}, {:.0} s",
+            args.bc_episodes,
+            demos.len(),
+            args.bc_epochs,
+            started.elapsed().as_secs_f64()
+        );
+    }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let metrics_path = args.out.join("metrics.jsonl");

@@ -156,6 +156,20 @@ impl Trainer {
         })
     }
 
+    /// Behaviour cloning of `demos` into a PPO learner's policy before training (see
+    /// `crm_learn::imitation`); returns the last epoch's loss.
+    pub fn imitate(
+        &mut self,
+        demos: &crm_learn::Demos,
+        epochs: usize,
+        learning_rate: f64,
+    ) -> anyhow::Result<f32> {
+        match &mut self.learner {
+            Learner::Ppo(ppo) => Ok(ppo.imitate(demos, epochs, learning_rate)?),
+            Learner::Sac(_) => bail!("behaviour cloning is for the PPO learners"),
+        }
+    }
+
     /// Environment steps trained so far (a resumed run starts at the checkpoint's).
     pub fn steps(&self) -> u64 {
         self.done
