@@ -12,18 +12,21 @@ use std::process::Command;
 use serde_json::{Value, json};
 use support::{TempDir, crm, get, http, start_server, start_worker, wait_state};
 
-fn inspect(path: &Path) -> Value {
+/// `crm record --inspect PATH` as JSON, or why not.
+fn try_inspect(path: &Path) -> Result<Value, String> {
     let out = Command::new(crm())
         .args(["record", "--inspect"])
         .arg(path)
         .output()
-        .expect("run crm record --inspect");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("inspect prints JSON")
+        .map_err(|e| format!("run crm record --inspect: {e}"))?;
+    if !out.status.success() {
+        return Err(String::from_utf8_lossy(&out.stderr).into_owned());
+    }
+    serde_json::from_slice(&out.stdout).map_err(|e| format!("inspect prints JSON: {e}"))
+}
+
+fn inspect(path: &Path) -> Value {
+    try_inspect(path).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The entities every recorded episode holds (`/crm/transitions` only when the machine moved:
@@ -154,14 +157,7 @@ fn crm_record_writes_an_episode_that_reads_back() {
 }
 
 fn submit(addr: &str, body: &Value) -> Value {
-    let reply = http(addr, "POST", "/api/v1/jobs", Some(&body.to_string()), None);
-    assert_eq!(
-        reply.status,
-        201,
-        "{}",
-        String::from_utf8_lossy(&reply.body)
-    );
-    reply.json()
+    support::submit(addr, &body.to_string())
 }
 
 #[test]
@@ -320,12 +316,7 @@ fn a_job_streams_live_to_a_viewer() {
     assert_eq!(support::recording_status(&addr, id), 404);
     // The viewer got the episode and the training series.
     let summary = support::wait_for(60, "the viewer to save the stream", || {
-        let out = Command::new(crm())
-            .args(["record", "--inspect"])
-            .arg(&saved)
-            .output()
-            .ok()?;
-        let summary: Value = serde_json::from_slice(&out.stdout).ok()?;
+        let summary = try_inspect(&saved).ok()?;
         let entities = summary["entities"].as_object()?;
         (entities.contains_key("/crm/episode") && entities.contains_key("/training/success_rate"))
             .then_some(summary)

@@ -89,7 +89,9 @@ pub fn render(chart: &Chart, series: &[Series]) -> Result<String, String> {
 }
 
 fn bounds(chart: &Chart, series: &[Series]) -> Option<((f64, f64), (f64, f64))> {
-    let points = || series.iter().flat_map(|s| s.points.iter());
+    if series.iter().all(|s| s.points.is_empty()) {
+        return None;
+    }
     let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
     let (mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY);
     for s in series {
@@ -106,7 +108,6 @@ fn bounds(chart: &Chart, series: &[Series]) -> Option<((f64, f64), (f64, f64))> 
             y1 = y1.max(y + half);
         }
     }
-    points().next()?;
     if let Some(range) = chart.y_range {
         (y0, y1) = range;
     }

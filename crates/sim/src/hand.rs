@@ -288,6 +288,14 @@ impl Hand {
             .transform_point(Vec3::from(GRASP_POINT))
     }
 
+    /// Which finger (thumb first) and link (proximal first) `body` is, if it is a finger link.
+    pub fn link_of(&self, body: RigidBodyHandle) -> Option<(usize, usize)> {
+        self.links
+            .iter()
+            .enumerate()
+            .find_map(|(f, links)| links.iter().position(|&l| l == body).map(|k| (f, k)))
+    }
+
     /// Moves the mount to `translation` at the end of the next physics step.
     pub fn move_mount(&self, world: &mut PhysicsWorld, translation: Vec3) {
         if let Some(body) = world.bodies.get_mut(self.mount) {

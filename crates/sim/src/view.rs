@@ -87,17 +87,10 @@ impl GraspEnv {
                     format!("object/part_{}", object_parts - 1)
                 }
                 Some(body) if body == hand.palm => "hand/palm".to_string(),
-                Some(body) => hand
-                    .links
-                    .iter()
-                    .enumerate()
-                    .find_map(|(f, links)| {
-                        links
-                            .iter()
-                            .position(|&l| l == body)
-                            .map(|k| format!("hand/{}/link_{k}", FINGERS[f]))
-                    })
-                    .unwrap_or_else(|| "other".to_string()),
+                Some(body) => hand.link_of(body).map_or_else(
+                    || "other".to_string(),
+                    |(f, k)| format!("hand/{}/link_{k}", FINGERS[f]),
+                ),
             };
             let pose = collider.position();
             parts.push(Part {

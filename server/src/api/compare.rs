@@ -90,9 +90,14 @@ fn eval_key(job: &Job) -> String {
     spec.to_string()
 }
 
-fn forced(job: &Job) -> bool {
+/// An evaluation's topology: a forced name, `auto`, or `task` (each task's assigned one).
+fn topology_of(job: &Job) -> String {
     let spec: Value = serde_json::from_str(&job.spec).unwrap_or_default();
-    !matches!(spec["topology"].as_str(), None | Some("task"))
+    spec["topology"].as_str().unwrap_or("task").to_string()
+}
+
+fn forced(job: &Job) -> bool {
+    topology_of(job) != "task"
 }
 
 /// Each run's finished evaluations (of any of its checkpoints) with their reports, newest
@@ -214,10 +219,7 @@ pub async fn compare(
             "algorithm": job.algorithm,
             "evaluation": found.as_ref().map(|(e, _)| e.id),
             "checkpoint": found.as_ref().and_then(|(e, _)| e.checkpoint_id),
-            "topology": found.as_ref().map(|(e, _)| {
-                let spec: Value = serde_json::from_str(&e.spec).unwrap_or_default();
-                spec["topology"].as_str().unwrap_or("task").to_string()
-            }),
+            "topology": found.as_ref().map(|(e, _)| topology_of(e)),
             "tasks": found.as_ref().and_then(|(e, _)| {
                 let spec: crm_api::EvalSpec = serde_json::from_str(&e.spec).ok()?;
                 Some(crm_api::jobs::task_list(&spec.task, &spec.tasks))
@@ -287,8 +289,7 @@ pub async fn topology(
     // "task" (each task's assigned one) or "auto" (the network's pick).
     let mut cells: BTreeMap<(String, String), (f64, u64, u64)> = BTreeMap::new();
     for job in evaluations {
-        let spec: Value = serde_json::from_str(&job.spec).unwrap_or_default();
-        let topology = spec["topology"].as_str().unwrap_or("task").to_string();
+        let topology = topology_of(job);
         let Some(report) = job
             .result
             .as_deref()

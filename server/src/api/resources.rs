@@ -127,20 +127,24 @@ pub async fn recording(State(state): State<Arc<AppState>>, Path(id): Path<String
                 ),
             )
         })?;
-    // Only the recorded size: bytes past it belong to an append in progress.
-    let mut bytes = tokio::fs::read(state.store.recording_path(&row))
+    // Streamed (a recording may reach --max-recording-bytes), and only the recorded size:
+    // bytes past it belong to an append in progress.
+    let file = tokio::fs::File::open(state.store.recording_path(&row))
         .await
         .map_err(ApiError::internal)?;
-    bytes.truncate(row.size as usize);
+    let body = Body::from_stream(tokio_util::io::ReaderStream::new(
+        tokio::io::AsyncReadExt::take(file, row.size as u64),
+    ));
     Ok((
         [
             (header::CONTENT_TYPE, "application/octet-stream".to_string()),
+            (header::CONTENT_LENGTH, row.size.to_string()),
             (
                 header::CONTENT_DISPOSITION,
                 format!("attachment; filename=\"job{}.rrd\"", job.id),
             ),
         ],
-        Body::from(bytes),
+        body,
     )
         .into_response())
 }

@@ -211,18 +211,10 @@ fn trace(env: GraspEnv, machine: crm::Machine, task: usize, seed: u64) -> anyhow
         if let Some(scene) = crm_env.env().scene() {
             let palm = scene.hand.palm_pose(&scene.world);
             for point in &crm_env.env().hand_contacts().points {
-                let link = scene
-                    .hand
-                    .links
-                    .iter()
-                    .enumerate()
-                    .find_map(|(f, links)| {
-                        links
-                            .iter()
-                            .position(|&l| Some(l) == point.other_body)
-                            .map(|k| format!("f{f}l{k}"))
-                    })
-                    .unwrap_or_else(|| "palm".into());
+                let link = point
+                    .other_body
+                    .and_then(|body| scene.hand.link_of(body))
+                    .map_or_else(|| "palm".into(), |(f, k)| format!("f{f}l{k}"));
                 let local = palm.inverse_transform_point(point.position);
                 eprintln!(
                     "       {link} at hand ({:+.3},{:+.3},{:+.3}) Fn={:.1} Ft={:.1} F=({:+.1},{:+.1},{:+.1})",
