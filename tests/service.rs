@@ -81,6 +81,28 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
     let workers = get(&addr, "/api/v1/workers");
     assert_eq!(workers["workers"][0]["alive"], true);
 
+    // A job that clones the oracle before PPO (a fresh lease runs the imitation first).
+    let cloned = submit(
+        &addr,
+        r#"{"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 64, "seed": 3, "envs": 1, "config": {"rollout_steps": 64}, "imitation": {"episodes": 4, "epochs": 40}}"#,
+    );
+    let cloned_id = cloned["id"].as_i64().expect("id");
+    let done = wait_state(&addr, cloned_id, "succeeded", 240);
+    assert_eq!(done["spec"]["imitation"]["episodes"], 4, "{done}");
+    let checkpoint_id = done["result"]["checkpoint_id"].as_i64().expect("id");
+    let eval = submit(
+        &addr,
+        &format!(
+            r#"{{"kind": "eval", "checkpoint_id": {checkpoint_id}, "episodes": 3, "task": "mouse-press", "seed": 1}}"#
+        ),
+    );
+    let evaluated = wait_state(&addr, eval["id"].as_i64().expect("id"), "succeeded", 240);
+    assert!(
+        evaluated["result"]["success_rate"].as_f64().expect("rate") > 0.0,
+        "the clone presses: {}",
+        evaluated["result"]
+    );
+
     // Refused requests change nothing.
     let before = get(&addr, "/api/v1/jobs");
     let cases = [
@@ -116,6 +138,18 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
         (
             r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "tasks": ["mug-wrap", "nope"]}"#,
             "tasks[1]",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 0}}"#,
+            "imitation.episodes",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "noise": 2}}"#,
+            "imitation.noise",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-sac", "steps": 10, "imitation": {"episodes": 5}}"#,
+            "imitation",
         ),
         (r#"{"kind": "fly"}"#, "kind"),
         ("not json", "body"),

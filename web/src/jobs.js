@@ -133,6 +133,7 @@ function submitForm(catalog, onQueued) {
       ['task', 'auto', ...catalog.topologies].map((t) => el('option', { value: t }, t))),
     envs: el('input', { id: 'f-envs', name: 'envs', type: 'text', inputmode: 'numeric', placeholder: 'one per worker core' }),
     config: el('textarea', { id: 'f-config', name: 'config', rows: 3, placeholder: '{"learning_rate": 0.0003}' }),
+    imitation: el('input', { id: 'f-imitation', name: 'imitation', type: 'text', inputmode: 'numeric', placeholder: 'off' }),
     checkpoint_id: el('input', { id: 'f-checkpoint_id', name: 'checkpoint_id', type: 'text', inputmode: 'numeric' }),
     episodes: el('input', { id: 'f-episodes', name: 'episodes', type: 'text', inputmode: 'numeric', value: '1000' }),
     record_every: el('input', { id: 'f-record_every', name: 'record_every', type: 'text', inputmode: 'numeric', placeholder: 'off' }),
@@ -144,6 +145,7 @@ function submitForm(catalog, onQueued) {
     field('steps', 'steps', inputs.steps, 'environment steps'),
     field('envs', 'environments', inputs.envs),
     field('config', 'config (JSON)', inputs.config, 'PPO settings, or SAC settings under "sac" for crm-sac'),
+    field('imitation', 'clone the oracle first (episodes)', inputs.imitation, 'behaviour cloning before PPO (crm-ppo, ippo, lppo)'),
   ];
   const evalOnly = [
     field('checkpoint_id', 'checkpoint id', inputs.checkpoint_id),
@@ -192,6 +194,8 @@ function submitForm(catalog, onQueued) {
       body.algorithm = inputs.algorithm.value;
       body.steps = number('steps');
       body.envs = number('envs');
+      const imitation = number('imitation');
+      if (imitation !== undefined) body.imitation = { episodes: imitation };
       const text = inputs.config.value.trim();
       if (text) {
         try {

@@ -95,6 +95,10 @@ check('the form shows API errors next to the field, then queues a job that appea
   await page.click('#submit-job button[type=submit]');
   await page.waitForFunction(() => /record\.connect/.test(document.querySelector('[data-error-for="record_connect"]').textContent));
   await page.fill('#f-record_connect', '');
+  await page.fill('#f-imitation', '0');
+  await page.click('#submit-job button[type=submit]');
+  await page.waitForFunction(() => /imitation\.episodes/.test(document.querySelector('[data-error-for="imitation"]').textContent));
+  await page.fill('#f-imitation', '40');
   await page.fill('#f-record_every', '5');
   await page.selectOption('#f-tasks', ['valve-twist']);
   await page.click('#submit-job button[type=submit]');
@@ -107,6 +111,7 @@ check('the form shows API errors next to the field, then queues a job that appea
   assert.equal(stored.spec.steps, 3000);
   assert.deepEqual(stored.spec.tasks, ['valve-twist']);
   assert.equal(stored.spec.record.every, 5);
+  assert.equal(stored.spec.imitation.episodes, 40);
 
   // Cancel it from its row; the list follows.
   await row.$('button:has-text("Cancel")').then((b) => b.click());

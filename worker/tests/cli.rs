@@ -397,5 +397,21 @@ fn behaviour_cloning_of_the_oracle_warms_up_a_ppo_policy() {
         assert_eq!(code, 2, "{algo}: {stderr}");
         assert!(stderr.contains("--bc-episodes"), "{stderr}");
     }
+    // Noise outside [0, 1] is refused naming the flag.
+    let (code, _, stderr) = crm(&[
+        "train",
+        "--task",
+        "mouse-press",
+        "--steps",
+        "64",
+        "--bc-episodes",
+        "2",
+        "--bc-noise",
+        "1.5",
+        "--out",
+        &out,
+    ]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--bc-noise"), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();
 }

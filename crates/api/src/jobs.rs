@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{PpoConfig, SacConfig};
+use crate::imitation::ImitationSpec;
 use crate::record::RecordSpec;
 
 /// The learners by name.
@@ -87,6 +88,10 @@ pub struct TrainSpec {
     /// Recording for the rerun viewer; off when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub record: Option<RecordSpec>,
+    /// Behaviour cloning of the scripted oracle before PPO; off when absent.
+    /// PPO learners of the grasping machine only (crm-ppo, ippo, lppo).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub imitation: Option<ImitationSpec>,
 }
 
 fn is_default_sac(config: &SacConfig) -> bool {

@@ -6,10 +6,12 @@
 
 pub mod catalog;
 pub mod config;
+pub mod imitation;
 pub mod jobs;
 pub mod record;
 
 pub use catalog::Catalog;
 pub use config::{ConfigError, PpoConfig, SacConfig};
+pub use imitation::ImitationSpec;
 pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, Row, TrainSpec};
 pub use record::RecordSpec;

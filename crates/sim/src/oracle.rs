@@ -14,6 +14,8 @@ const GRASP_SCALE: f32 = 0.003;
 const CLEARANCE: f32 = 0.06;
 /// Fraction of the grasp step used to move a held object (slower swings less).
 const LIFT_SPEED: f32 = 0.6;
+/// Height (m) above the success test's lift height to which a held object is raised.
+const LIFT_MARGIN: f32 = 0.02;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Phase {
@@ -28,7 +30,6 @@ pub struct Oracle {
     phase: Phase,
     phase_steps: usize,
     settled: usize,
-    travelled: f32,
 }
 
 impl Default for Oracle {
@@ -47,7 +48,6 @@ impl Oracle {
             phase: Phase::Align,
             phase_steps: 0,
             settled: 0,
-            travelled: 0.0,
         }
     }
 
@@ -166,11 +166,14 @@ impl Oracle {
                         }
                     }
                     _ => {
-                        if self.travelled < 0.08 {
+                        // Lift (along the task's motion) until the object stands clear of the
+                        // success height: a rule on an observed quantity (the object's
+                        // displacement), not on a step count, so a policy cloned from the
+                        // oracle can tell from its observation when to stop.
+                        if parts.object[2] < env.config().lift_height + LIFT_MARGIN {
                             for axis in 0..3 {
                                 action[axis] = LIFT_SPEED * motion[axis];
                             }
-                            self.travelled += LIFT_SPEED * GRASP_SCALE;
                         }
                     }
                 }

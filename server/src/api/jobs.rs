@@ -108,6 +108,7 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
             }
             check_task(&spec.task, &spec.tasks, &spec.topology)?;
             check_record(&spec.record)?;
+            check_imitation(&spec)?;
             spec.config
                 .validate()
                 .map_err(|e| ApiError::invalid(format!("config.{}", e.field), e.message))?;
@@ -151,6 +152,24 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
             format!("{other:?}: must be \"train\" or \"eval\""),
         )),
     }
+}
+
+fn check_imitation(spec: &TrainSpec) -> Result<(), ApiError> {
+    let Some(imitation) = &spec.imitation else {
+        return Ok(());
+    };
+    if !crm_api::ImitationSpec::supports(spec.algorithm) {
+        return Err(ApiError::invalid(
+            "imitation",
+            format!(
+                "behaviour cloning is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo), not {}",
+                spec.algorithm.name()
+            ),
+        ));
+    }
+    imitation
+        .validate()
+        .map_err(|e| ApiError::invalid(format!("imitation.{}", e.field), e.message))
 }
 
 fn check_record(record: &Option<crm_api::RecordSpec>) -> Result<(), ApiError> {

@@ -89,6 +89,7 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
             config: ppo.clone(),
             sac: sac.clone(),
             record: None,
+            imitation: None,
         };
         let started = Instant::now();
         let mut trainer = Trainer::new(spec, &args.env, None, None)?;

@@ -9,8 +9,9 @@ use anyhow::{Context, bail};
 use crm_learn::PpoConfig;
 
 use super::{EnvArgs, read_json};
+use crate::jobs::demos;
 use crate::jobs::train::Trainer;
-use crm_api::{Algorithm, SacConfig, TrainSpec};
+use crm_api::{Algorithm, ImitationSpec, SacConfig, TrainSpec};
 
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
@@ -53,6 +54,10 @@ pub struct TrainArgs {
     /// Passes over the oracle's demonstrations.
     #[arg(long, default_value_t = 20)]
     pub bc_epochs: usize,
+    /// Noise (standard deviation, in action units) on the oracle's executed actions while
+    /// it demonstrates; the labels stay clean (DART).
+    #[arg(long, default_value_t = 0.0)]
+    pub bc_noise: f32,
     /// Learning rate of behaviour cloning.
     #[arg(long, default_value_t = 1e-3)]
     pub bc_learning_rate: f64,
@@ -61,6 +66,22 @@ pub struct TrainArgs {
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.steps <= 0 {
         bail!("--steps must be positive, got {}", args.steps);
+    }
+    let imitation = (args.bc_episodes > 0).then_some(ImitationSpec {
+        episodes: args.bc_episodes,
+        epochs: args.bc_epochs,
+        learning_rate: args.bc_learning_rate,
+        noise: args.bc_noise,
+    });
+    if let Some(imitation) = &imitation {
+        imitation
+            .validate()
+            .map_err(|e| anyhow::anyhow!("--bc-{}: {}", e.field.replace('_', "-"), e.message))?;
+        if !ImitationSpec::supports(args.algo) {
+            bail!(
+                "--bc-episodes: behaviour cloning is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo)"
+            );
+        }
     }
     let (config, sac) = if args.algo == Algorithm::CrmSac {
         (PpoConfig::default(), read_json::<SacConfig>(&args.config)?)
@@ -78,40 +99,14 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         config,
         sac,
         record: None,
+        imitation,
     };
     let mut trainer = Trainer::new(spec.clone(), &args.env, args.resume.as_deref(), None)?;
-    if args.bc_episodes > 0 {
-        let started = std::time::Instant::now();
-        let benchmark = args.env.benchmark()?;
-        let machine = match args.algo {
-            Algorithm::Ppo => {
-                bail!("--bc-episodes: the oracle acts in the grasping machine, not the flat one")
-            }
-            Algorithm::CrmSac => {
-                bail!(
-                    "--bc-episodes: behaviour cloning is for the PPO learners (crm-ppo, ippo, lppo)"
-                )
-            }
-            _ => args.env.machine()?,
-        };
-        let choice =
-            crate::jobs::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
-        let (demos, successes) = crate::jobs::demos::oracle_demos(
-            &benchmark,
-            &args.env.config(),
-            &machine,
-            &choice,
-            args.bc_episodes,
-            args.seed.wrapping_mul(7_919).wrapping_add(1 << 32),
-        )?;
-        let loss = trainer.imitate(&demos, args.bc_epochs, args.bc_learning_rate)?;
-        eprintln!(
-            "behaviour cloning: {successes} of {} oracle episodes succeeded, {} steps, {} epochs, loss {loss:.4}, {:.0} s",
-            args.bc_episodes,
-            demos.len(),
-            args.bc_epochs,
-            started.elapsed().as_secs_f64()
-        );
+    if spec.imitation.is_some() {
+        demos::imitate(&spec, &args.env, &mut trainer, |line| {
+            eprintln!("{line}");
+            true
+        })?;
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;

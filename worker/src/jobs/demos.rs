@@ -1,62 +1,203 @@
-//! Oracle demonstrations for behaviour cloning: the scripted controller (`grasp_sim::oracle`,
-//! with privileged state) runs episodes through the grasping machine; its successful
-//! episodes become (abstract state, stage, action, mask) rows for `Ppo::imitate`.
+//! Demonstrations for behaviour cloning from the scripted controller (`grasp_sim::oracle`, with
+//! privileged state), through the grasping machine, as (abstract state, stage, action, mask)
+//! rows for `Ppo::imitate`, and a training job's imitation stage ([`imitate`]). The oracle's
+//! executed actions may carry noise while its labels stay clean (DART, Laskey et al., 2017),
+//! so the clone also sees how the oracle recovers from small mistakes.
 
 use std::sync::Arc;
 
+use anyhow::bail;
+use crm_api::{ImitationSpec, TrainSpec};
 use crm_learn::Demos;
 use grasp_sim::oracle::Oracle;
 use grasp_sim::{Benchmark, GraspEnv, SimConfig};
 use rayon::prelude::*;
 
 use super::EnvChoice;
+use super::train::Trainer;
+use crate::commands::EnvArgs;
 
-/// Runs `episodes` oracle episodes (seeds `seed`, `seed + 1`, ...) on the job's task choice;
-/// returns the rows of the successful ones and how many succeeded.
-pub fn oracle_demos(
-    benchmark: &Arc<Benchmark>,
-    config: &SimConfig,
-    machine: &crm::Machine,
-    choice: &EnvChoice,
-    episodes: u64,
-    seed: u64,
-) -> anyhow::Result<(Demos, u64)> {
-    let results: Vec<anyhow::Result<Option<Demos>>> = (0..episodes)
+/// Where demonstrations come from: the environments, the first seed and the noise on the
+/// oracle's executed actions.
+pub struct DemoSource<'a> {
+    pub benchmark: &'a Arc<Benchmark>,
+    pub config: &'a SimConfig,
+    pub machine: &'a crm::Machine,
+    pub choice: &'a EnvChoice,
+    /// Episode `k` resets with seed `seed + k`.
+    pub seed: u64,
+    /// Standard deviation of Gaussian noise added to the oracle's executed action on each
+    /// live dimension (DART, Laskey et al., 2017): the rows keep the clean label, so the
+    /// clone also sees how the oracle recovers from small mistakes. 0: none.
+    pub noise: f32,
+}
+
+/// What a collection of demonstrations gave.
+#[derive(Clone, Debug, Default)]
+pub struct Collected {
+    pub demos: Demos,
+    pub episodes: u64,
+    /// Episodes that ended in the `success` stage (their rows are the demonstrations).
+    pub successes: u64,
+}
+
+/// Runs `episodes` oracle episodes; keeps the rows of the successful ones.
+pub fn oracle_demos(source: &DemoSource, episodes: u64) -> anyhow::Result<Collected> {
+    let results: Vec<anyhow::Result<(bool, Demos)>> = (0..episodes)
         .into_par_iter()
-        .map(|k| {
-            let mut grasp = GraspEnv::new(benchmark.clone(), config.clone());
-            choice.apply(&mut grasp)?;
-            let mut env = crm::CrmEnv::new(machine.clone(), grasp, crm::RewardMode::Crm);
-            let (mut stage, mut state) = env.reset(seed.wrapping_add(k))?;
-            let mut oracle = Oracle::new();
-            let mut demos = Demos::default();
-            loop {
-                let name = env.machine().stage_name(stage).to_string();
-                let action: Vec<f32> = oracle
-                    .act(env.env(), &name)
-                    .iter()
-                    .map(|a| a.clamp(-1.0, 1.0))
-                    .collect();
-                demos.states.push(state.clone());
-                demos.stages.push(stage);
-                demos.masks.push(env.machine().action_mask(stage));
-                demos.actions.push(action.clone());
-                let step = env.step(&action)?;
-                if step.done || step.truncated {
-                    let success = step.done && env.machine().stage_name(step.stage) == "success";
-                    return Ok(success.then_some(demos));
-                }
-                (stage, state) = (step.stage, step.abstract_state);
-            }
-        })
+        .map(|k| episode(source, source.seed.wrapping_add(k), source.noise))
         .collect();
-    let mut all = Demos::default();
-    let mut successes = 0;
+    let mut all = Collected {
+        episodes,
+        ..Collected::default()
+    };
     for result in results {
-        if let Some(demos) = result? {
-            successes += 1;
-            all.extend(demos);
+        let (success, demos) = result?;
+        // The oracle's failures teach nothing.
+        if success {
+            all.successes += 1;
+            all.demos.extend(demos);
         }
     }
-    Ok((all, successes))
+    Ok(all)
+}
+
+/// One oracle episode; returns whether it succeeded and its rows (the clean labels).
+fn episode(source: &DemoSource, seed: u64, sigma: f32) -> anyhow::Result<(bool, Demos)> {
+    let mut grasp = GraspEnv::new(source.benchmark.clone(), source.config.clone());
+    source.choice.apply(&mut grasp)?;
+    let mut env = crm::CrmEnv::new(source.machine.clone(), grasp, crm::RewardMode::Crm);
+    let (mut stage, mut state) = env.reset(seed)?;
+    let mut oracle = Oracle::new();
+    let mut noise = crm_learn::Noise::new(seed ^ 0x5EED_DA27);
+    let mut demos = Demos::default();
+    loop {
+        let name = env.machine().stage_name(stage).to_string();
+        let mask = env.machine().action_mask(stage);
+        let label: Vec<f32> = oracle
+            .act(env.env(), &name)
+            .iter()
+            .map(|a| a.clamp(-1.0, 1.0))
+            .collect();
+        let action: Vec<f32> = if sigma > 0.0 {
+            label
+                .iter()
+                .zip(&mask)
+                .map(|(a, m)| (a + m * sigma * noise.normal()).clamp(-1.0, 1.0))
+                .collect()
+        } else {
+            label.clone()
+        };
+        demos.states.push(state.clone());
+        demos.stages.push(stage);
+        demos.masks.push(mask);
+        demos.actions.push(label);
+        let step = env.step(&action)?;
+        if step.done || step.truncated {
+            let success = step.done && env.machine().stage_name(step.stage) == "success";
+            return Ok((success, demos));
+        }
+        (stage, state) = (step.stage, step.abstract_state);
+    }
+}
+
+/// Runs a training job's imitation (`spec.imitation`) on `trainer`'s policy: behaviour cloning
+/// of the oracle's demonstrations. `note` gets a line saying what it gave and how long it
+/// took; its answer is returned (`false`: stop the job, as when it was cancelled meanwhile).
+pub fn imitate(
+    spec: &TrainSpec,
+    env: &EnvArgs,
+    trainer: &mut Trainer,
+    mut note: impl FnMut(&str) -> bool,
+) -> anyhow::Result<bool> {
+    let Some(imitation) = &spec.imitation else {
+        return Ok(true);
+    };
+    if !ImitationSpec::supports(spec.algorithm) {
+        bail!(
+            "imitation: behaviour cloning is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo)"
+        );
+    }
+    let started = std::time::Instant::now();
+    let benchmark = env.benchmark()?;
+    let machine = env.machine()?;
+    let choice = EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
+    let config = env.config();
+    let source = DemoSource {
+        benchmark: &benchmark,
+        config: &config,
+        machine: &machine,
+        choice: &choice,
+        seed: spec.seed.wrapping_mul(7_919).wrapping_add(1 << 32),
+        noise: imitation.noise,
+    };
+    let all = oracle_demos(&source, imitation.episodes)?;
+    let loss = trainer.imitate(&all.demos, imitation.epochs, imitation.learning_rate)?;
+    let line = format!(
+        "behaviour cloning: {} of {} oracle episodes succeeded, {} steps, {} epochs, loss {loss:.4}, {:.0} s",
+        all.successes,
+        all.episodes,
+        all.demos.len(),
+        imitation.epochs,
+        started.elapsed().as_secs_f64()
+    );
+    Ok(note(&line))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use grasp_sim::TaskChoice;
+
+    #[test]
+    fn the_oracles_successful_episodes_are_the_demonstrations_and_noise_moves_the_states() {
+        let benchmark = Arc::new(Benchmark::builtin());
+        let machine = crm::Machine::from_spec(grasp_sim::spec::grasping_spec()).expect("machine");
+        let task = benchmark
+            .tasks
+            .iter()
+            .position(|t| t.id == "mouse-press")
+            .expect("task");
+        let choice = EnvChoice {
+            tasks: TaskChoice::Fixed(task),
+            topologies: None,
+        };
+        let config = SimConfig::default();
+        let source = |noise| DemoSource {
+            benchmark: &benchmark,
+            config: &config,
+            machine: &machine,
+            choice: &choice,
+            seed: 3,
+            noise,
+        };
+        // The oracle presses every time: all its rows are demonstrations.
+        let clean = oracle_demos(&source(0.0), 2).expect("oracle");
+        assert_eq!((clean.episodes, clean.successes), (2, 2));
+        let d = &clean.demos;
+        assert!(d.len() > 10, "{} rows", d.len());
+        assert!(
+            d.stages.len() == d.len() && d.actions.len() == d.len() && d.masks.len() == d.len()
+        );
+        for ((action, mask), stage) in d.actions.iter().zip(&d.masks).zip(&d.stages) {
+            assert_eq!(mask, &machine.action_mask(*stage));
+            assert!(action.iter().all(|a| (-1.0..=1.0).contains(a)));
+        }
+        // Seeded: the same source gives the same rows.
+        assert_eq!(
+            oracle_demos(&source(0.0), 2).expect("again").demos.states,
+            d.states
+        );
+        // Noise on the executed actions leads to other states, from the same first one.
+        let noisy = oracle_demos(&source(0.1), 2).expect("noisy");
+        assert_eq!(
+            noisy.successes, 2,
+            "the oracle still presses under small noise"
+        );
+        assert_eq!(noisy.demos.states[0], d.states[0]);
+        assert_ne!(noisy.demos.states, d.states);
+        // The labels stay the oracle's clean actions: in approach it heads for the grasp
+        // location at full speed on some axis.
+        assert!(noisy.demos.actions[0].iter().any(|a| a.abs() == 1.0));
+    }
 }

@@ -15,6 +15,7 @@ use tokio::sync::mpsc;
 
 use super::{Client, WorkerOptions};
 use crate::commands::EnvArgs;
+use crate::jobs::demos;
 use crate::jobs::eval::evaluate;
 use crate::jobs::train::Trainer;
 use crate::record::{Recorder, SharedRecorder, lock};
@@ -171,6 +172,15 @@ fn train(
             steps = resumed_from,
             "resumed from checkpoint"
         );
+    } else if spec.imitation.is_some() {
+        // A resumed job's checkpoint already holds the clone; a fresh one clones first.
+        let finished = demos::imitate(&spec, &EnvArgs::default(), &mut trainer, |line| {
+            tracing::info!(job = job.job_id, "{line}");
+            !link.stopped()
+        })?;
+        if !finished {
+            return Ok(None);
+        }
     }
     let path = dir.join("checkpoint.safetensors");
     let every = Duration::from_secs(options.checkpoint_every_s.max(1));
