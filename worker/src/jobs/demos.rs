@@ -45,7 +45,7 @@ pub struct Collected {
 pub fn oracle_demos(source: &DemoSource, episodes: u64) -> anyhow::Result<Collected> {
     let results: Vec<anyhow::Result<(bool, Demos)>> = (0..episodes)
         .into_par_iter()
-        .map(|k| episode(source, source.seed.wrapping_add(k), source.noise))
+        .map(|k| episode(source, source.seed.wrapping_add(k)))
         .collect();
     let mut all = Collected {
         episodes,
@@ -63,7 +63,7 @@ pub fn oracle_demos(source: &DemoSource, episodes: u64) -> anyhow::Result<Collec
 }
 
 /// One oracle episode; returns whether it succeeded and its rows (the clean labels).
-fn episode(source: &DemoSource, seed: u64, sigma: f32) -> anyhow::Result<(bool, Demos)> {
+fn episode(source: &DemoSource, seed: u64) -> anyhow::Result<(bool, Demos)> {
     let mut grasp = GraspEnv::new(source.benchmark.clone(), source.config.clone());
     source.choice.apply(&mut grasp)?;
     let mut env = crm::CrmEnv::new(source.machine.clone(), grasp, crm::RewardMode::Crm);
@@ -79,11 +79,11 @@ fn episode(source: &DemoSource, seed: u64, sigma: f32) -> anyhow::Result<(bool, 
             .iter()
             .map(|a| a.clamp(-1.0, 1.0))
             .collect();
-        let action: Vec<f32> = if sigma > 0.0 {
+        let action: Vec<f32> = if source.noise > 0.0 {
             label
                 .iter()
                 .zip(&mask)
-                .map(|(a, m)| (a + m * sigma * noise.normal()).clamp(-1.0, 1.0))
+                .map(|(a, m)| (a + m * source.noise * noise.normal()).clamp(-1.0, 1.0))
                 .collect()
         } else {
             label.clone()
