@@ -41,16 +41,6 @@ pub const MAX_IMITATION_EPISODES: u64 = 100_000;
 pub const MAX_IMITATION_EPOCHS: usize = 1000;
 
 impl ImitationSpec {
-    /// Cloning from `episodes` oracle episodes with the other settings at their defaults.
-    pub fn with_episodes(episodes: u64) -> Self {
-        Self {
-            episodes,
-            epochs: default_epochs(),
-            learning_rate: default_learning_rate(),
-            noise: 0.0,
-        }
-    }
-
     /// Whether `algorithm` can start from a clone: the PPO learners of the grasping machine
     /// (the oracle acts in its stages; SAC's actor is another network).
     pub fn supports(algorithm: Algorithm) -> bool {
@@ -92,7 +82,15 @@ mod tests {
     #[test]
     fn defaults_fill_in_and_bad_fields_are_named() {
         let spec: ImitationSpec = serde_json::from_str(r#"{"episodes": 100}"#).expect("spec");
-        assert_eq!(spec, ImitationSpec::with_episodes(100));
+        assert_eq!(
+            spec,
+            ImitationSpec {
+                episodes: 100,
+                epochs: 20,
+                learning_rate: 1e-3,
+                noise: 0.0,
+            }
+        );
         assert!(spec.validate().is_ok());
         let field = |json: &str| {
             serde_json::from_str::<ImitationSpec>(json)

@@ -102,12 +102,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         imitation,
     };
     let mut trainer = Trainer::new(spec.clone(), &args.env, args.resume.as_deref(), None)?;
-    if spec.imitation.is_some() {
-        demos::imitate(&spec, &args.env, &mut trainer, |line| {
-            eprintln!("{line}");
-            true
-        })?;
-    }
+    demos::imitate(&spec, &args.env, &mut trainer, |line| {
+        eprintln!("{line}");
+        true
+    })?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let metrics_path = args.out.join("metrics.jsonl");

@@ -101,8 +101,8 @@ fn episode(source: &DemoSource, seed: u64) -> anyhow::Result<(bool, Demos)> {
     }
 }
 
-/// Runs a training job's imitation (`spec.imitation`) on `trainer`'s policy: behaviour cloning
-/// of the oracle's demonstrations. `note` gets a line saying what it gave and how long it
+/// Runs a training job's imitation (`spec.imitation`; none: nothing to do) on `trainer`'s
+/// policy: behaviour cloning of the oracle's demonstrations. `note` gets a line saying what it gave and how long it
 /// took; its answer is returned (`false`: stop the job, as when it was cancelled meanwhile).
 pub fn imitate(
     spec: &TrainSpec,

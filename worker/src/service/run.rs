@@ -172,8 +172,9 @@ fn train(
             steps = resumed_from,
             "resumed from checkpoint"
         );
-    } else if spec.imitation.is_some() {
-        // A resumed job's checkpoint already holds the clone; a fresh one clones first.
+    } else {
+        // A resumed job's checkpoint already holds the clone; a fresh one clones first (when
+        // its spec asks for imitation).
         let finished = demos::imitate(&spec, &EnvArgs::default(), &mut trainer, |line| {
             tracing::info!(job = job.job_id, "{line}");
             !link.stopped()
