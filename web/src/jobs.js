@@ -134,6 +134,9 @@ function submitForm(catalog, onQueued) {
     envs: el('input', { id: 'f-envs', name: 'envs', type: 'text', inputmode: 'numeric', placeholder: 'one per worker core' }),
     config: el('textarea', { id: 'f-config', name: 'config', rows: 3, placeholder: '{"learning_rate": 0.0003}' }),
     imitation: el('input', { id: 'f-imitation', name: 'imitation', type: 'text', inputmode: 'numeric', placeholder: 'off' }),
+    objective: el('select', { id: 'f-objective', name: 'objective' },
+      el('option', { value: 'scripted' }, 'scripted (the paper: the arm executes it)'),
+      el('option', { value: 'learned' }, 'learned (the policy executes it)')),
     checkpoint_id: el('input', { id: 'f-checkpoint_id', name: 'checkpoint_id', type: 'text', inputmode: 'numeric' }),
     episodes: el('input', { id: 'f-episodes', name: 'episodes', type: 'text', inputmode: 'numeric', value: '1000' }),
     record_every: el('input', { id: 'f-record_every', name: 'record_every', type: 'text', inputmode: 'numeric', placeholder: 'off' }),
@@ -163,6 +166,7 @@ function submitForm(catalog, onQueued) {
       field('kind', 'kind', kind), ...trainOnly, ...evalOnly,
       field('tasks', 'tasks', inputs.tasks, 'none selected: random tasks'),
       field('seed', 'seed', inputs.seed), field('topology', 'topology', inputs.topology, 'task: assigned; auto: the network\'s pick'),
+      field('objective', 'objective', inputs.objective, 'who lifts, pulls, twists or presses once the grasp is ready'),
       field('record', 'record every N episodes', inputs.record_every, 'rerun recording stored with the job (at most 20 episodes)'),
       field('record_connect', 'or stream to a viewer', inputs.record_connect, 'live instead of the file')),
     formError,
@@ -184,6 +188,7 @@ function submitForm(catalog, onQueued) {
     if (tasks.length) body.tasks = tasks;
     body.seed = number('seed');
     if (inputs.topology.value !== 'task') body.topology = inputs.topology.value;
+    if (inputs.objective.value !== 'scripted') body.objective = inputs.objective.value;
     const every = number('record_every');
     const connect = inputs.record_connect.value.trim();
     if (every !== undefined || connect) {

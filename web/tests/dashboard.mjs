@@ -101,6 +101,7 @@ check('the form shows API errors next to the field, then queues a job that appea
   await page.fill('#f-imitation', '40');
   await page.fill('#f-record_every', '5');
   await page.selectOption('#f-tasks', ['valve-twist']);
+  await page.selectOption('#f-objective', 'learned');
   await page.click('#submit-job button[type=submit]');
   const ok = await page.waitForSelector('.message .ok');
   const id = Number((await ok.textContent()).match(/Job (\d+) queued/)[1]);
@@ -112,6 +113,7 @@ check('the form shows API errors next to the field, then queues a job that appea
   assert.deepEqual(stored.spec.tasks, ['valve-twist']);
   assert.equal(stored.spec.record.every, 5);
   assert.equal(stored.spec.imitation.episodes, 40);
+  assert.equal(stored.spec.objective, 'learned');
 
   // Cancel it from its row; the list follows.
   await row.$('button:has-text("Cancel")').then((b) => b.click());

@@ -29,7 +29,9 @@ pub struct PpoConfig {
     pub ent_coef: f32,
     /// Value loss coefficient. Not given in the paper; 0.5, stable-baselines3's default.
     pub vf_coef: f32,
-    /// Gradient norm clip. Not given in the paper; 0.5, stable-baselines3's default.
+    /// Gradient norm clip, applied to the actor's and the critic's gradients separately (so
+    /// the value loss cannot shrink the policy's step). Not given in the paper; 0.5,
+    /// stable-baselines3's and CleanRL's value.
     pub max_grad_norm: f32,
     /// Passes over each rollout. Not given in the paper; 10, stable-baselines3's default.
     pub update_epochs: usize,
@@ -41,6 +43,16 @@ pub struct PpoConfig {
     /// Paper V-B-2: 99% over the most recent 100 episodes.
     pub early_stop_success: f32,
     pub early_stop_window: usize,
+    /// KL guard: an update stops its epochs at the first minibatch whose approximate KL
+    /// exceeds 1.5 x this (stable-baselines3's `target_kl` rule); 0 turns it off. 0.02.
+    pub target_kl: f32,
+    /// Initial log standard deviation of the policy. CleanRL's continuous PPO: 0.
+    pub init_log_std: f32,
+    /// Running observation normalization (SB3 `VecNormalize`, which the authors used).
+    pub norm_obs: bool,
+    /// Reward scaling by the running std of the discounted return (SB3 `VecNormalize`), one
+    /// factor for both reward parts.
+    pub norm_reward: bool,
 }
 
 impl Default for PpoConfig {
@@ -59,6 +71,10 @@ impl Default for PpoConfig {
             hidden: vec![256, 256],
             early_stop_success: 0.99,
             early_stop_window: 100,
+            target_kl: 0.02,
+            init_log_std: 0.0,
+            norm_obs: true,
+            norm_reward: true,
         }
     }
 }
@@ -100,6 +116,15 @@ impl PpoConfig {
         }
         if self.max_grad_norm.is_nan() || self.max_grad_norm <= 0.0 {
             return bad("max_grad_norm", "must be positive");
+        }
+        if !(self.target_kl.is_finite() && self.target_kl >= 0.0) {
+            return bad(
+                "target_kl",
+                "must be a non-negative number (0 turns the guard off)",
+            );
+        }
+        if !(self.init_log_std.is_finite() && (-5.0..=2.0).contains(&self.init_log_std)) {
+            return bad("init_log_std", "must be in [-5, 2]");
         }
         if self.update_epochs == 0 || self.rollout_steps == 0 {
             return bad(

@@ -50,6 +50,30 @@ impl Algorithm {
     }
 }
 
+/// Who executes the task's objective once the grasp is ready (DESIGN.md, "The paper's grasp
+/// protocol").
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObjectiveMode {
+    /// The paper's protocol: the policy approaches and closes the hand; once the grasp is
+    /// ready the arm executes the objective by script and the judge grades it.
+    #[default]
+    Scripted,
+    /// The policy must also lift, pull, twist or press by itself (harder, beyond the paper).
+    Learned,
+}
+
+impl ObjectiveMode {
+    pub fn name(self) -> &'static str {
+        match self {
+            ObjectiveMode::Scripted => "scripted",
+            ObjectiveMode::Learned => "learned",
+        }
+    }
+}
+
 /// The task ids a job names (`task` then `tasks`); empty means random tasks.
 pub fn task_list(task: &Option<String>, tasks: &[String]) -> Vec<String> {
     task.iter().chain(tasks).cloned().collect()
@@ -92,6 +116,9 @@ pub struct TrainSpec {
     /// PPO learners of the grasping machine only (crm-ppo, ippo, lppo).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub imitation: Option<ImitationSpec>,
+    /// `scripted` (default, the paper's protocol) or `learned`.
+    #[serde(default)]
+    pub objective: ObjectiveMode,
 }
 
 fn is_default_sac(config: &SacConfig) -> bool {
@@ -121,6 +148,9 @@ pub struct EvalSpec {
     /// Recording of evaluated episodes for the rerun viewer; off when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub record: Option<RecordSpec>,
+    /// `scripted` (default, the paper's protocol) or `learned`.
+    #[serde(default)]
+    pub objective: ObjectiveMode,
 }
 
 fn default_episodes() -> u64 {
@@ -136,6 +166,7 @@ impl Default for EvalSpec {
             tasks: Vec::new(),
             topology: None,
             record: None,
+            objective: ObjectiveMode::default(),
         }
     }
 }
@@ -171,8 +202,12 @@ pub struct Iteration {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Row {
     pub success_rate: f64,
+    /// Mean control steps the policy took.
     pub mean_episode_length: f64,
     pub episodes: u64,
+    /// Mean simulated seconds, the arm's scripted execution included.
+    #[serde(default)]
+    pub mean_sim_seconds: f64,
 }
 
 /// The whole table for one checkpoint.
@@ -184,30 +219,41 @@ pub struct EvalReport {
     pub seed: u64,
     pub success_rate: f64,
     pub mean_episode_length: f64,
+    /// Mean simulated seconds per episode, the arm's scripted execution included.
+    #[serde(default)]
+    pub mean_sim_seconds: f64,
+    /// Who executed the objective (`scripted` or `learned`).
+    #[serde(default)]
+    pub objective: ObjectiveMode,
     pub per_objective: BTreeMap<String, Row>,
+    /// How the episodes ended: the terminal stage reached, or `truncated` at the time limit.
+    #[serde(default)]
+    pub outcomes: BTreeMap<String, u64>,
 }
 
 impl EvalReport {
     /// The report as a Markdown table.
     pub fn markdown(&self) -> String {
         let mut text = format!(
-            "{} ({} steps): success {:.3}, mean length {:.1} over {} episodes (seed {})\n\n| objective | success | episode length |\n| --- | --- | --- |\n",
+            "{} ({} steps, {} objective): success {:.3}, mean length {:.1} control steps ({:.1} s simulated) over {} episodes (seed {})\n\n| objective | success | episode length | simulated s |\n| --- | --- | --- | --- |\n",
             self.algorithm,
             self.trained_steps,
+            self.objective.name(),
             self.success_rate,
             self.mean_episode_length,
+            self.mean_sim_seconds,
             self.episodes,
             self.seed
         );
         for (name, r) in &self.per_objective {
             text.push_str(&format!(
-                "| {name} | {:.2} | {:.1} |\n",
-                r.success_rate, r.mean_episode_length
+                "| {name} | {:.2} | {:.1} | {:.1} |\n",
+                r.success_rate, r.mean_episode_length, r.mean_sim_seconds
             ));
         }
         text.push_str(&format!(
-            "| overall | {:.2} | {:.1} |\n",
-            self.success_rate, self.mean_episode_length
+            "| overall | {:.2} | {:.1} | {:.1} |\n",
+            self.success_rate, self.mean_episode_length, self.mean_sim_seconds
         ));
         text
     }

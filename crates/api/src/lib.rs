@@ -13,5 +13,5 @@ pub mod record;
 pub use catalog::Catalog;
 pub use config::{ConfigError, PpoConfig, SacConfig};
 pub use imitation::ImitationSpec;
-pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, Row, TrainSpec};
+pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, ObjectiveMode, Row, TrainSpec};
 pub use record::RecordSpec;

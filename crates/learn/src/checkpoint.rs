@@ -10,6 +10,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::network::{ActorCritic, Layout};
+use crate::normalize::ObsNorm;
+
+/// Tensor names of the observation statistics in a PPO-family checkpoint.
+const NORM_MEAN: &str = "obs_norm.mean";
+const NORM_VAR: &str = "obs_norm.var";
+const NORM_COUNT: &str = "obs_norm.count";
 
 /// Format tag in every header.
 pub const FORMAT: &str = "crm-grasp-checkpoint/1";
@@ -45,9 +51,32 @@ fn refuse(path: &Path, message: impl Into<String>) -> Error {
 }
 
 impl Checkpoint {
-    /// Writes the networks and the header to `path`.
+    /// Writes the networks, their observation statistics and the header to `path`.
     pub fn save(net: &ActorCritic, header: &CheckpointHeader, path: &Path) -> Result<()> {
-        Self::save_params(net.params(), header, path)
+        let (mean, var, count) = net.norm().to_parts();
+        let layout = net.layout();
+        let device = net.device();
+        let shape = (layout.stages, layout.state_width);
+        let stats = [
+            (
+                NORM_MEAN,
+                candle_core::Tensor::from_vec(mean, shape, device)?,
+            ),
+            (NORM_VAR, candle_core::Tensor::from_vec(var, shape, device)?),
+            (
+                NORM_COUNT,
+                candle_core::Tensor::from_vec(count, layout.stages, device)?,
+            ),
+        ];
+        Self::write(
+            net.params()
+                .iter()
+                .map(|(name, var)| (name.as_str(), var.as_tensor()))
+                .chain(stats.iter().map(|(name, t)| (*name, t)))
+                .collect(),
+            header,
+            path,
+        )
     }
 
     /// Writes named parameters (any learner's) and the header to `path`.
@@ -56,13 +85,24 @@ impl Checkpoint {
         header: &CheckpointHeader,
         path: &Path,
     ) -> Result<()> {
+        Self::write(
+            params
+                .iter()
+                .map(|(name, var)| (name.as_str(), var.as_tensor()))
+                .collect(),
+            header,
+            path,
+        )
+    }
+
+    fn write(
+        tensors: Vec<(&str, &candle_core::Tensor)>,
+        header: &CheckpointHeader,
+        path: &Path,
+    ) -> Result<()> {
         let json = serde_json::to_string(header)
             .map_err(|e| refuse(path, format!("cannot encode header: {e}")))?;
         let metadata = HashMap::from([(HEADER_KEY.to_string(), json)]);
-        let tensors: Vec<(&str, &candle_core::Tensor)> = params
-            .iter()
-            .map(|(name, var)| (name.as_str(), var.as_tensor()))
-            .collect();
         safetensors::serialize_to_file(tensors, Some(metadata), path)
             .map_err(|e| refuse(path, format!("cannot write: {e}")))
     }
@@ -121,8 +161,13 @@ impl Checkpoint {
         Ok((bytes, header))
     }
 
-    /// Sets every parameter from the checkpoint's tensor of the same name and shape.
-    fn fill(bytes: &[u8], path: &Path, params: &[(String, candle_core::Var)]) -> Result<()> {
+    /// Sets every parameter from the checkpoint's tensor of the same name and shape; returns
+    /// all the file's tensors.
+    fn fill(
+        bytes: &[u8],
+        path: &Path,
+        params: &[(String, candle_core::Var)],
+    ) -> Result<HashMap<String, candle_core::Tensor>> {
         let tensors = candle_core::safetensors::load_buffer(bytes, &candle_core::Device::Cpu)
             .map_err(|e| refuse(path, format!("cannot read tensors: {e}")))?;
         for (name, var) in params {
@@ -141,7 +186,39 @@ impl Checkpoint {
             }
             var.set(tensor)?;
         }
-        Ok(())
+        Ok(tensors)
+    }
+
+    /// The observation statistics stored beside a PPO-family network.
+    fn norm_of(
+        tensors: &HashMap<String, candle_core::Tensor>,
+        layout: crate::network::Layout,
+        path: &Path,
+    ) -> Result<ObsNorm> {
+        let flat = |name: &str| -> Result<Vec<f64>> {
+            let tensor = tensors.get(name).ok_or_else(|| {
+                refuse(
+                    path,
+                    format!(
+                        "no observation-normalizer statistics ({name}): made before they were \
+                         stored; retrain it"
+                    ),
+                )
+            })?;
+            Ok(tensor
+                .to_dtype(candle_core::DType::F64)?
+                .flatten_all()?
+                .to_vec1::<f64>()?)
+        };
+        let (mean, var, count) = (flat(NORM_MEAN)?, flat(NORM_VAR)?, flat(NORM_COUNT)?);
+        ObsNorm::from_parts(layout.state_width, &mean, &var, &count)
+            .filter(|n| n.stage_count() == layout.stages)
+            .ok_or_else(|| {
+                refuse(
+                    path,
+                    "observation-normalizer statistics do not fit the network",
+                )
+            })
     }
 
     /// Loads a PPO-family checkpoint made for this machine (`spec_hash`) and environment
@@ -155,8 +232,9 @@ impl Checkpoint {
         if header.algorithm == "crm-sac" {
             return Err(refuse(path, "a crm-sac checkpoint: load it with load_sac"));
         }
-        let net = ActorCritic::new(header.layout, &header.hidden, 0)?;
-        Self::fill(&bytes, path, net.params())?;
+        let mut net = ActorCritic::new(header.layout, &header.hidden, 0)?;
+        let tensors = Self::fill(&bytes, path, net.params())?;
+        net.set_norm(Self::norm_of(&tensors, header.layout, path)?)?;
         Ok((net, header))
     }
 
@@ -216,13 +294,18 @@ mod tests {
             stages: 5,
             actions: 8,
         };
-        let net = ActorCritic::new(layout, &[32, 32], 11).expect("net");
+        let mut net = ActorCritic::new(layout, &[32, 32], 11).expect("net");
+        net.update_norm(&[vec![1.0, 2.0, 3.0], vec![-1.0, 0.0, 5.0]], &[1, 1]);
         let path = temp("roundtrip.safetensors");
         let written = header(&net);
         Checkpoint::save(&net, &written, &path).expect("save");
         let (loaded, read) = Checkpoint::load(&path, "abc123", "grasp-sim/test").expect("load");
         assert_eq!(read, written);
         assert_eq!(bits(&loaded), bits(&net));
+        assert_eq!(loaded.norm(), net.norm());
+        let state = [vec![0.5, 2.5, 4.0]];
+        let input = |n: &ActorCritic| n.input(&state, &[1]).expect("input").to_vec2::<f32>();
+        assert_eq!(input(&loaded).expect("v"), input(&net).expect("v"));
         assert_eq!(Checkpoint::read_header(&path).expect("header").steps, 1000);
         std::fs::remove_file(&path).ok();
     }
@@ -270,6 +353,17 @@ mod tests {
             .expect_err("bare")
             .to_string();
         assert!(err.contains("without a crm-grasp header"), "{err}");
+        // A network without its normalizer statistics (an older checkpoint) is refused.
+        let stale = temp("stale.safetensors");
+        Checkpoint::save_params(net.params(), &header(&net), &stale).expect("write");
+        let err = Checkpoint::load(&stale, "abc123", "grasp-sim/test")
+            .expect_err("no statistics")
+            .to_string();
+        assert!(
+            err.contains("no observation-normalizer statistics"),
+            "{err}"
+        );
+        std::fs::remove_file(&stale).ok();
         for p in [path, junk, bare] {
             std::fs::remove_file(p).ok();
         }

@@ -4,10 +4,9 @@
 //! mask), so masked dimensions get no gradient, as in the PPO update.
 
 use candle_core::Tensor;
-use candle_nn::Optimizer;
 
 use crate::error::{Error, Result};
-use crate::ppo::{Ppo, clip_grad_norm};
+use crate::ppo::Ppo;
 
 /// Demonstrations: abstract states, stages, union-space actions in `[-1, 1]` and the stages'
 /// action masks, one row per control step.
@@ -54,7 +53,12 @@ impl Ppo {
             });
         }
         let device = self.net.device().clone();
-        self.optimizer_mut().set_learning_rate(learning_rate);
+        if self.config.norm_obs {
+            // The policy sees normalized inputs: the demonstrations set the statistics.
+            self.net.update_norm(&demos.states, &demos.stages);
+        }
+        let saved_rate = self.optimizer_mut().learning_rate;
+        self.optimizer_mut().learning_rate = learning_rate;
         let mut last = 0.0;
         for _ in 0..epochs {
             let order = self.noise_mut().shuffle(n);
@@ -71,14 +75,16 @@ impl Ppo {
                 let mean = self.net.mean(&self.net.input(&states, &stages)?)?;
                 let live = masks.sum_all()?.to_scalar::<f32>()?.max(1.0);
                 let loss = (((mean - targets)?.sqr()? * masks)?.sum_all()? / f64::from(live))?;
-                let mut grads = loss.backward()?;
-                clip_grad_norm(&self.net, &mut grads, self.config.max_grad_norm)?;
-                self.optimizer_mut().step(&grads)?;
+                let grads = loss.backward()?;
+                let max_norm = self.config.max_grad_norm;
+                let params = self.net.params().to_vec();
+                self.optimizer_mut().step(&params, &grads, max_norm)?;
                 total += loss.to_scalar::<f32>()?;
                 batches += 1;
             }
             last = total / batches.max(1) as f32;
         }
+        self.optimizer_mut().learning_rate = saved_rate;
         Ok(last)
     }
 }

@@ -1,15 +1,21 @@
 //! The actor-critic networks: a Gaussian policy over the union action space with the stage's
 //! action mask, and a value function on the stage's abstract state plus the stage.
 //!
-//! Both see `[phi_i(u) zero-padded to the widest abstraction, one-hot(stage)]`. Dimensions
-//! outside the stage's action set are neither sampled nor counted in log-probabilities, so
-//! they receive no gradient.
+//! Both see `[phi_i(u) normalized and zero-padded to the widest abstraction, one-hot(stage)]`
+//! (see `normalize.rs`; the statistics live with the networks and in their checkpoints).
+//! Dimensions outside the stage's action set are neither sampled nor counted in
+//! log-probabilities, so they receive no gradient. Weights start orthogonal (CleanRL's
+//! `layer_init`: gain sqrt(2) for hidden layers, 0.01 for the policy's output, 1 for the
+//! value's).
 
-use candle_core::{D, DType, Device, Tensor, Var};
-use candle_nn::{Linear, Module};
+use candle_core::{D, Device, Tensor, Var};
+use candle_nn::Linear;
 
 use crate::error::{Error, Result};
+use crate::layers::{Init, mlp_init};
+pub(crate) use crate::layers::{mlp, run};
 use crate::noise::Noise;
+use crate::normalize::ObsNorm;
 
 /// Input and output sizes of the networks, from a machine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -36,13 +42,6 @@ impl Layout {
     }
 }
 
-/// Uniform initial weights in `[-bound, bound]` from the seeded generator.
-fn uniform(noise: &mut Noise, n: usize, bound: f32) -> Vec<f32> {
-    (0..n)
-        .map(|_| (2.0 * noise.unit_f32() - 1.0) * bound)
-        .collect()
-}
-
 /// The actor and the critic, with their parameters in a stable, named order.
 pub struct ActorCritic {
     layout: Layout,
@@ -52,67 +51,7 @@ pub struct ActorCritic {
     critic: Vec<Linear>,
     log_std: Var,
     params: Vec<(String, Var)>,
-}
-
-pub(crate) fn layer(
-    noise: &mut Noise,
-    device: &Device,
-    name: &str,
-    inputs: usize,
-    outputs: usize,
-    gain: f32,
-    params: &mut Vec<(String, Var)>,
-) -> Result<Linear> {
-    // Uniform with the variance of He initialization, scaled by `gain`.
-    let bound = gain * (6.0 / inputs as f32).sqrt();
-    let weight = Var::from_vec(
-        uniform(noise, inputs * outputs, bound),
-        (outputs, inputs),
-        device,
-    )?;
-    let bias = Var::zeros(outputs, DType::F32, device)?;
-    let linear = Linear::new(weight.as_tensor().clone(), Some(bias.as_tensor().clone()));
-    params.push((format!("{name}.weight"), weight));
-    params.push((format!("{name}.bias"), bias));
-    Ok(linear)
-}
-
-pub(crate) fn mlp(
-    noise: &mut Noise,
-    device: &Device,
-    prefix: &str,
-    widths: &[usize],
-    params: &mut Vec<(String, Var)>,
-) -> Result<Vec<Linear>> {
-    let last = widths.len() - 2;
-    widths
-        .windows(2)
-        .enumerate()
-        .map(|(k, w)| {
-            // A small last layer keeps the initial policy near its mean and values near zero.
-            let gain = if k == last { 0.01 } else { 1.0 };
-            layer(
-                noise,
-                device,
-                &format!("{prefix}.{k}"),
-                w[0],
-                w[1],
-                gain,
-                params,
-            )
-        })
-        .collect()
-}
-
-pub(crate) fn run(layers: &[Linear], input: &Tensor) -> Result<Tensor> {
-    let mut x = input.clone();
-    for (k, layer) in layers.iter().enumerate() {
-        x = layer.forward(&x)?;
-        if k + 1 < layers.len() {
-            x = x.tanh()?;
-        }
-    }
-    Ok(x)
+    norm: ObsNorm,
 }
 
 /// The network input `[phi_i(u) zero-padded to state_width, one-hot(stage)]` for a batch.
@@ -120,6 +59,17 @@ pub fn encode(
     layout: Layout,
     states: &[Vec<f32>],
     stages: &[usize],
+    device: &Device,
+) -> Result<Tensor> {
+    encode_normalized(layout, states, stages, None, device)
+}
+
+/// [`encode`] with each state normalized by `norm` first.
+pub fn encode_normalized(
+    layout: Layout,
+    states: &[Vec<f32>],
+    stages: &[usize],
+    norm: Option<&ObsNorm>,
     device: &Device,
 ) -> Result<Tensor> {
     if states.len() != stages.len() {
@@ -147,7 +97,11 @@ pub fn encode(
             });
         }
         let base = row * width;
-        data[base..base + state.len()].copy_from_slice(state);
+        let slot = &mut data[base..base + state.len()];
+        match norm {
+            Some(norm) => norm.normalize_into(state, stage, slot),
+            None => slot.copy_from_slice(state),
+        }
         data[base + layout.state_width + stage] = 1.0;
     }
     Ok(Tensor::from_vec(data, (states.len(), width), device)?)
@@ -174,9 +128,27 @@ impl ActorCritic {
         actor_widths.push(layout.actions);
         let mut critic_widths = widths;
         critic_widths.push(1);
-        let actor = mlp(&mut noise, &device, "actor", &actor_widths, &mut params)?;
-        let critic = mlp(&mut noise, &device, "critic", &critic_widths, &mut params)?;
-        let log_std = Var::from_vec(vec![-0.5f32; layout.actions], layout.actions, &device)?;
+        let hidden_init = Init::Orthogonal(std::f32::consts::SQRT_2);
+        let actor = mlp_init(
+            &mut noise,
+            &device,
+            "actor",
+            &actor_widths,
+            &mut params,
+            hidden_init,
+            Init::Orthogonal(0.01),
+        )?;
+        let critic = mlp_init(
+            &mut noise,
+            &device,
+            "critic",
+            &critic_widths,
+            &mut params,
+            hidden_init,
+            Init::Orthogonal(1.0),
+        )?;
+        // CleanRL's continuous PPO starts at log std 0; `Ppo::new` sets the configured one.
+        let log_std = Var::from_vec(vec![0.0f32; layout.actions], layout.actions, &device)?;
         params.push(("actor.log_std".to_string(), log_std.clone()));
         Ok(Self {
             layout,
@@ -186,7 +158,39 @@ impl ActorCritic {
             critic,
             log_std,
             params,
+            norm: ObsNorm::new(layout.stages, layout.state_width),
         })
+    }
+
+    /// The observation statistics the inputs are normalized with.
+    pub fn norm(&self) -> &ObsNorm {
+        &self.norm
+    }
+
+    /// Folds a batch of raw abstract states into the observation statistics.
+    pub fn update_norm(&mut self, states: &[Vec<f32>], stages: &[usize]) {
+        self.norm.update(states, stages);
+    }
+
+    /// Replaces the observation statistics (checkpoints, resuming); they must fit the layout.
+    pub fn set_norm(&mut self, norm: ObsNorm) -> Result<()> {
+        if norm.stage_count() != self.layout.stages || norm.width() != self.layout.state_width {
+            return Err(Error::Length {
+                what: "observation statistics",
+                expected: self.layout.stages * self.layout.state_width,
+                got: norm.stage_count() * norm.width(),
+            });
+        }
+        self.norm = norm;
+        Ok(())
+    }
+
+    /// Sets every log standard deviation to `value`.
+    pub fn set_log_std(&self, value: f32) -> Result<()> {
+        let n = self.layout.actions;
+        self.log_std
+            .set(&Tensor::from_vec(vec![value; n], n, &self.device)?)?;
+        Ok(())
     }
 
     pub fn layout(&self) -> Layout {
@@ -209,7 +213,7 @@ impl ActorCritic {
     /// Builds the network input from abstract states (each at most `state_width` long) and
     /// their stages.
     pub fn input(&self, states: &[Vec<f32>], stages: &[usize]) -> Result<Tensor> {
-        encode(self.layout, states, stages, &self.device)
+        encode_normalized(self.layout, states, stages, Some(&self.norm), &self.device)
     }
 
     /// Policy means `[batch, actions]`.
@@ -375,7 +379,7 @@ mod tests {
             .expect("lp")
             .to_vec1::<f32>()
             .expect("v")[0];
-        let std = (-0.5f32).exp();
+        let std = 1.0f32;
         let want =
             -0.5 * ((1.0 - 0.5) / std).powi(2) - std.ln() - 0.5 * (2.0 * std::f32::consts::PI).ln();
         assert!((got - want).abs() < 1e-5, "{got} vs {want}");

@@ -1,17 +1,26 @@
 //! PPO inside a Contextual Reward Machine (paper, section III-B), read top to bottom:
-//! a rollout (see `rollout.rs`), GAE with the transition reward in the TD error, then the
-//! minibatch loop with the clipped surrogate on abstract states, the value loss, gradient-norm
-//! clipping and the paper's learning-rate steps. The reward mode picks CRM-PPO (`crm`), LPPO
-//! (`dense`) or IPPO (`sparse`) on the same machine.
+//! a rollout (see `rollout.rs`), reward scaling, GAE with the transition reward in the TD
+//! error, then the minibatch epochs with the clipped surrogate on normalized abstract states,
+//! the value loss, per-network gradient clipping in a fused Adam (`optim.rs`), the KL guard
+//! and the paper's learning-rate steps; last, the rollout's states join the observation
+//! statistics. The reward mode picks CRM-PPO (`crm`), LPPO (`dense`) or IPPO (`sparse`) on
+//! the same machine.
+//!
+//! Speed: the rollout is encoded into tensors once per update; each epoch permutes them with
+//! one gather per column and the minibatches are contiguous row ranges of that, so a
+//! minibatch costs only its forward and backward kernels.
 
-use candle_core::Tensor;
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use std::time::Instant;
+
+use candle_core::{DType, Tensor};
 
 use crate::error::{Error, Result};
 use crate::gae::{StepRecord, gae, normalize};
 use crate::network::{ActorCritic, Layout};
 use crate::noise::Noise;
-use crate::rollout::Rollout;
+use crate::normalize::RewardScaler;
+use crate::optim::Adam;
+use crate::rollout::{Actor, Rollout};
 use crm_api::PpoConfig;
 
 /// What one update reports (CleanRL's names).
@@ -23,30 +32,48 @@ pub struct UpdateStats {
     pub approx_kl: f32,
     pub clipfrac: f32,
     pub learning_rate: f64,
+    /// Minibatches run before the KL guard stopped the update (all of them when it did not).
+    pub minibatches: usize,
+    /// The reward scale applied to this rollout (1 without reward scaling).
+    pub reward_scale: f32,
+    /// Where the update's wall time went (seconds).
+    pub timing: UpdateTiming,
 }
 
-/// The learner: networks, optimizer and its noise source.
+/// Wall time of an update's phases (seconds), for `crm bench learn`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct UpdateTiming {
+    /// Values, reward scaling, GAE and encoding the rollout into tensors.
+    pub prepare: f64,
+    /// The per-epoch permutation gathers.
+    pub shuffle: f64,
+    /// Forward passes, losses and backward passes.
+    pub forward_backward: f64,
+    /// The fused Adam steps (gradient reads, norms, moments, parameter writes).
+    pub optimizer: f64,
+    /// Reading the statistics back (KL, clip fraction, losses) and the observation statistics.
+    pub bookkeeping: f64,
+}
+
+/// The learner: networks, optimizer, reward scaler and its noise source.
 pub struct Ppo {
     pub net: ActorCritic,
     pub config: PpoConfig,
-    optimizer: AdamW,
+    optimizer: Adam,
+    scaler: RewardScaler,
     noise: Noise,
 }
+
+const HALF_LOG_TWO_PI: f32 = 0.918_938_5;
 
 impl Ppo {
     pub fn new(layout: Layout, config: PpoConfig, seed: u64) -> Result<Self> {
         config.validate()?;
         let net = ActorCritic::new(layout, &config.hidden, seed)?;
-        let vars = net.params().iter().map(|(_, v)| v.clone()).collect();
-        let optimizer = AdamW::new(
-            vars,
-            ParamsAdamW {
-                lr: config.learning_rate,
-                weight_decay: 0.0,
-                ..ParamsAdamW::default()
-            },
-        )?;
+        net.set_log_std(config.init_log_std)?;
+        let optimizer = Adam::new(net.params(), config.learning_rate);
         Ok(Self {
+            scaler: RewardScaler::new(config.gamma),
             net,
             config,
             optimizer,
@@ -54,7 +81,7 @@ impl Ppo {
         })
     }
 
-    pub(crate) fn optimizer_mut(&mut self) -> &mut AdamW {
+    pub(crate) fn optimizer_mut(&mut self) -> &mut Adam {
         &mut self.optimizer
     }
 
@@ -62,8 +89,9 @@ impl Ppo {
         &mut self.noise
     }
 
-    /// Copies the weights of `other` (same layout and widths) into this learner's networks,
-    /// keeping the optimizer bound to them: how a run resumes from a checkpoint.
+    /// Copies the weights and observation statistics of `other` (same layout and widths)
+    /// into this learner's networks, keeping the optimizer bound to them: how a run resumes
+    /// from a checkpoint.
     pub fn load_weights(&mut self, other: &ActorCritic) -> Result<()> {
         if other.layout() != self.net.layout() || other.hidden() != self.net.hidden() {
             return Err(Error::Config {
@@ -80,6 +108,7 @@ impl Ppo {
         for ((_, mine), (_, theirs)) in self.net.params().iter().zip(other.params()) {
             mine.set(theirs.as_tensor())?;
         }
+        self.net.set_norm(other.norm().clone())?;
         Ok(())
     }
 
@@ -94,34 +123,25 @@ impl Ppo {
         masks: &[Vec<f32>],
         deterministic: bool,
     ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
-        let rows = states.len();
-        let width = self.net.layout().actions;
-        let input = self.net.input(states, stages)?;
-        let mean = self.net.mean(&input)?;
-        let means: Vec<Vec<f32>> = mean.to_vec2()?;
-        let std = self.net.std()?;
-        let actions: Vec<Vec<f32>> = means
-            .iter()
-            .map(|row| {
-                if deterministic {
-                    row.clone()
+        let means: Vec<Vec<f32>> = self.net.mean(&self.net.input(states, stages)?)?.to_vec2()?;
+        let log_std: Vec<f32> = self.net.std()?.iter().map(|s| s.ln()).collect();
+        let mut actions = Vec::with_capacity(means.len());
+        let mut log_probs = Vec::with_capacity(means.len());
+        for (row, mask) in means.iter().zip(masks) {
+            let mut action = Vec::with_capacity(row.len());
+            let mut log_prob = 0.0f32;
+            for ((&m, &ls), &live) in row.iter().zip(&log_std).zip(mask) {
+                let z = if deterministic {
+                    0.0
                 } else {
-                    row.iter()
-                        .zip(&std)
-                        .map(|(m, s)| m + s * self.noise.normal())
-                        .collect()
-                }
-            })
-            .collect();
-        let device = self.net.device();
-        let log_probs = self
-            .net
-            .log_prob(
-                &mean,
-                &Tensor::from_vec(actions.concat(), (rows, width), device)?,
-                &Tensor::from_vec(masks.concat(), (rows, width), device)?,
-            )?
-            .to_vec1::<f32>()?;
+                    self.noise.normal()
+                };
+                action.push(m + ls.exp() * z);
+                log_prob += live * (-0.5 * z * z - ls - HALF_LOG_TWO_PI);
+            }
+            actions.push(action);
+            log_probs.push(log_prob);
+        }
         Ok((actions, log_probs))
     }
 
@@ -138,140 +158,169 @@ impl Ppo {
         Ok((actions.pop().unwrap_or_default(), log_probs[0]))
     }
 
+    /// The reward scale for this rollout: the running return statistics with its rewards
+    /// folded in (environment by environment, in time order).
+    fn reward_scale(&mut self, rollout: &Rollout) -> f32 {
+        if !self.config.norm_reward {
+            return 1.0;
+        }
+        for t in 0..rollout.len() {
+            let reward = rollout.intra[t] + rollout.transition[t];
+            self.scaler
+                .observe(rollout.env[t], reward, rollout.ended[t]);
+        }
+        self.scaler.factor()
+    }
+
     /// One PPO update on a rollout at training `progress` in `[0, 1]`.
     pub fn update(&mut self, rollout: &Rollout, progress: f64) -> Result<UpdateStats> {
+        let started = Instant::now();
         let n = rollout.len();
         let width = self.net.layout().actions;
         let device = self.net.device().clone();
-        let values: Vec<f32> = self
-            .net
-            .value(&self.net.input(&rollout.states, &rollout.stages)?)?
-            .to_vec1()?;
+        let inputs = self.net.input(&rollout.states, &rollout.stages)?;
+        let values: Vec<f32> = self.net.value(&inputs)?.to_vec1()?;
         let next_values: Vec<f32> = self
             .net
             .value(&self.net.input(&rollout.next_states, &rollout.next_stages)?)?
             .to_vec1()?;
+        let scale = self.reward_scale(rollout);
         let records: Vec<StepRecord> = (0..n)
             .map(|t| StepRecord {
-                intra: rollout.intra[t],
-                transition: rollout.transition[t],
+                intra: rollout.intra[t] * scale,
+                transition: rollout.transition[t] * scale,
                 value: values[t],
                 next_value: next_values[t],
                 terminal: rollout.terminal[t],
                 last: rollout.last[t],
             })
             .collect();
-        let (advantages, returns) = gae(&records, self.config.gamma, self.config.gae_lambda);
+        let (mut advantages, returns) = gae(&records, self.config.gamma, self.config.gae_lambda);
+        // Normalized once over the rollout (CleanRL and SB3 do it per minibatch; with
+        // minibatches of hundreds the two differ only by sampling noise).
+        if n > 1 {
+            normalize(&mut advantages)?;
+        }
+        let rows = |v: &[Vec<f32>]| -> Result<Tensor> {
+            Ok(Tensor::from_vec(v.concat(), (n, width), &device)?)
+        };
+        let columns = [
+            inputs,
+            rows(&rollout.actions)?,
+            rows(&rollout.masks)?,
+            Tensor::from_vec(rollout.log_probs.clone(), n, &device)?,
+            Tensor::from_vec(advantages, n, &device)?,
+            Tensor::from_vec(returns, n, &device)?,
+        ];
 
         let learning_rate = self.config.learning_rate_at(progress);
-        self.optimizer.set_learning_rate(learning_rate);
+        self.optimizer.learning_rate = learning_rate;
         let mut stats = UpdateStats {
             learning_rate,
+            reward_scale: scale,
             ..UpdateStats::default()
         };
-        let mut batches = 0usize;
-        for _ in 0..self.config.update_epochs {
-            let order = self.noise.shuffle(n);
-            for chunk in order.chunks(self.config.minibatch_size) {
-                let pick =
-                    |v: &Vec<Vec<f32>>| chunk.iter().map(|&i| v[i].clone()).collect::<Vec<_>>();
-                let states = pick(&rollout.states);
-                let stages: Vec<usize> = chunk.iter().map(|&i| rollout.stages[i]).collect();
-                let flat = |rows: Vec<Vec<f32>>| -> Result<Tensor> {
-                    let len = rows.len();
-                    Ok(Tensor::from_vec(rows.concat(), (len, width), &device)?)
-                };
-                let actions = flat(pick(&rollout.actions))?;
-                let masks = flat(pick(&rollout.masks))?;
-                let old_log_probs = Tensor::from_vec(
-                    chunk
-                        .iter()
-                        .map(|&i| rollout.log_probs[i])
-                        .collect::<Vec<_>>(),
-                    chunk.len(),
-                    &device,
-                )?;
-                let mut batch_advantages: Vec<f32> = chunk.iter().map(|&i| advantages[i]).collect();
-                if batch_advantages.len() > 1 {
-                    normalize(&mut batch_advantages)?;
+        stats.timing.prepare = started.elapsed().as_secs_f64();
+        let minibatch = self.config.minibatch_size.min(n).max(1);
+        'epochs: for _ in 0..self.config.update_epochs {
+            let order: Vec<u32> = self
+                .noise
+                .shuffle(n)
+                .into_iter()
+                .map(|i| i as u32)
+                .collect();
+            let order = Tensor::from_vec(order, n, &device)?;
+            let shuffle_start = Instant::now();
+            let shuffled = columns
+                .iter()
+                .map(|c| c.index_select(&order, 0))
+                .collect::<candle_core::Result<Vec<_>>>()?;
+            stats.timing.shuffle += shuffle_start.elapsed().as_secs_f64();
+            for start in (0..n).step_by(minibatch) {
+                let len = minibatch.min(n - start);
+                let batch = shuffled
+                    .iter()
+                    .map(|c| c.narrow(0, start, len))
+                    .collect::<candle_core::Result<Vec<_>>>()?;
+                let kl = self.minibatch(&batch, &mut stats)?;
+                if self.config.target_kl > 0.0 && kl > 1.5 * self.config.target_kl {
+                    break 'epochs;
                 }
-                let batch_advantages = Tensor::from_vec(batch_advantages, chunk.len(), &device)?;
-                let batch_returns = Tensor::from_vec(
-                    chunk.iter().map(|&i| returns[i]).collect::<Vec<_>>(),
-                    chunk.len(),
-                    &device,
-                )?;
-
-                let input = self.net.input(&states, &stages)?;
-                let log_probs = self
-                    .net
-                    .log_prob(&self.net.mean(&input)?, &actions, &masks)?;
-                let log_ratio = (&log_probs - &old_log_probs)?;
-                let ratio = log_ratio.exp()?;
-                let eps = f64::from(self.config.clip_coef);
-                let unclipped = (&ratio * &batch_advantages)?;
-                let clipped = (ratio.clamp(1.0 - eps, 1.0 + eps)? * &batch_advantages)?;
-                let policy_loss = unclipped.minimum(&clipped)?.mean_all()?.neg()?;
-                let value_loss = (self.net.value(&input)? - &batch_returns)?
-                    .sqr()?
-                    .mean_all()?;
-                let entropy = self.net.entropy(&masks)?.mean_all()?;
-                let loss = ((&policy_loss + (&value_loss * f64::from(self.config.vf_coef))?)?
-                    - (&entropy * f64::from(self.config.ent_coef))?)?;
-
-                let mut grads = loss.backward()?;
-                clip_grad_norm(&self.net, &mut grads, self.config.max_grad_norm)?;
-                self.optimizer.step(&grads)?;
-
-                // approx_kl = mean((ratio - 1) - log ratio), as CleanRL.
-                let approx_kl = ((&ratio - 1.0)? - &log_ratio)?
-                    .mean_all()?
-                    .to_scalar::<f32>()?;
-                let clipfrac = ((&ratio - 1.0)?
-                    .abs()?
-                    .gt(eps)?
-                    .to_dtype(candle_core::DType::F32)?)
-                .mean_all()?
-                .to_scalar::<f32>()?;
-                stats.policy_loss += policy_loss.to_scalar::<f32>()?;
-                stats.value_loss += value_loss.to_scalar::<f32>()?;
-                stats.entropy += entropy.to_scalar::<f32>()?;
-                stats.approx_kl += approx_kl;
-                stats.clipfrac += clipfrac;
-                batches += 1;
             }
         }
-        let scale = 1.0 / batches.max(1) as f32;
+        let scale = 1.0 / stats.minibatches.max(1) as f32;
         stats.policy_loss *= scale;
         stats.value_loss *= scale;
         stats.entropy *= scale;
         stats.approx_kl *= scale;
         stats.clipfrac *= scale;
+        let norm_start = Instant::now();
+        if self.config.norm_obs {
+            self.net.update_norm(&rollout.states, &rollout.stages);
+        }
+        stats.timing.bookkeeping += norm_start.elapsed().as_secs_f64();
         Ok(stats)
+    }
+
+    /// One gradient step on a minibatch `[inputs, actions, masks, old log-probs, advantages,
+    /// returns]`; adds its losses to `stats` and returns its approximate KL.
+    fn minibatch(&mut self, batch: &[Tensor], stats: &mut UpdateStats) -> Result<f32> {
+        let started = Instant::now();
+        let [input, actions, masks, old_log_probs, advantages, returns] = batch else {
+            return Err(Error::Length {
+                what: "minibatch columns",
+                expected: 6,
+                got: batch.len(),
+            });
+        };
+        let log_probs = self.net.log_prob(&self.net.mean(input)?, actions, masks)?;
+        let log_ratio = (&log_probs - old_log_probs)?;
+        let ratio = log_ratio.exp()?;
+        let eps = f64::from(self.config.clip_coef);
+        let unclipped = (&ratio * advantages)?;
+        let clipped = (ratio.clamp(1.0 - eps, 1.0 + eps)? * advantages)?;
+        let policy_loss = unclipped.minimum(&clipped)?.mean_all()?.neg()?;
+        let value_loss = (self.net.value(input)? - returns)?.sqr()?.mean_all()?;
+        let entropy = self.net.entropy(masks)?.mean_all()?;
+        let loss = ((&policy_loss + (&value_loss * f64::from(self.config.vf_coef))?)?
+            - (&entropy * f64::from(self.config.ent_coef))?)?;
+        let grads = loss.backward()?;
+        let stepped = Instant::now();
+        stats.timing.forward_backward += (stepped - started).as_secs_f64();
+        self.optimizer
+            .step(self.net.params(), &grads, self.config.max_grad_norm)?;
+        let read = Instant::now();
+        stats.timing.optimizer += (read - stepped).as_secs_f64();
+
+        // approx_kl = mean((ratio - 1) - log ratio) and the clip fraction, as CleanRL, on the
+        // host from one read of the log ratios.
+        let log_ratio: Vec<f32> = log_ratio.to_dtype(DType::F32)?.to_vec1()?;
+        let count = log_ratio.len().max(1) as f32;
+        let approx_kl = log_ratio.iter().map(|&l| (l.exp() - 1.0) - l).sum::<f32>() / count;
+        let clipfrac = log_ratio
+            .iter()
+            .filter(|&&l| (l.exp() - 1.0).abs() > self.config.clip_coef)
+            .count() as f32
+            / count;
+        stats.policy_loss += policy_loss.to_scalar::<f32>()?;
+        stats.value_loss += value_loss.to_scalar::<f32>()?;
+        stats.entropy += entropy.to_scalar::<f32>()?;
+        stats.approx_kl += approx_kl;
+        stats.clipfrac += clipfrac;
+        stats.minibatches += 1;
+        stats.timing.bookkeeping += read.elapsed().as_secs_f64();
+        Ok(approx_kl)
     }
 }
 
-/// Scales all gradients so their global L2 norm is at most `max_norm`; returns the norm before.
-pub fn clip_grad_norm(
-    net: &ActorCritic,
-    grads: &mut candle_core::backprop::GradStore,
-    max_norm: f32,
-) -> Result<f32> {
-    let mut total = 0.0f32;
-    for (_, var) in net.params() {
-        if let Some(grad) = grads.get(var.as_tensor()) {
-            total += grad.sqr()?.sum_all()?.to_scalar::<f32>()?;
-        }
+impl Actor for Ppo {
+    fn act_batch(
+        &mut self,
+        states: &[Vec<f32>],
+        stages: &[usize],
+        masks: &[Vec<f32>],
+        deterministic: bool,
+    ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
+        Ppo::act_batch(self, states, stages, masks, deterministic)
     }
-    let norm = total.sqrt();
-    if norm > max_norm {
-        let factor = f64::from(max_norm / (norm + 1e-6));
-        for (_, var) in net.params() {
-            if let Some(grad) = grads.get(var.as_tensor()) {
-                let scaled = (grad * factor)?;
-                grads.insert(var.as_tensor(), scaled);
-            }
-        }
-    }
-    Ok(norm)
 }

@@ -6,7 +6,6 @@
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::ppo::Ppo;
 
 /// Collected experience: each environment's steps contiguous, environments in order.
 #[derive(Clone, Debug, Default)]
@@ -24,6 +23,10 @@ pub struct Rollout {
     pub terminal: Vec<bool>,
     /// The trajectory ends after this step (episode end, or the rollout's cut).
     pub last: Vec<bool>,
+    /// The episode ended with this step (terminal stage or time limit; not the cut).
+    pub ended: Vec<bool>,
+    /// The environment (index) each step came from.
+    pub env: Vec<usize>,
     /// Episodes that ended in this rollout: (success, length, return).
     pub episodes: Vec<(bool, usize, f32)>,
 }
@@ -53,6 +56,8 @@ impl Rollout {
         self.transition.append(&mut other.transition);
         self.terminal.append(&mut other.terminal);
         self.last.append(&mut other.last);
+        self.ended.append(&mut other.ended);
+        self.env.append(&mut other.env);
         self.episodes.append(&mut other.episodes);
     }
 }
@@ -78,18 +83,6 @@ pub trait Actor {
         masks: &[Vec<f32>],
         deterministic: bool,
     ) -> Result<(Vec<Vec<f32>>, Vec<f32>)>;
-}
-
-impl Actor for Ppo {
-    fn act_batch(
-        &mut self,
-        states: &[Vec<f32>],
-        stages: &[usize],
-        masks: &[Vec<f32>],
-        deterministic: bool,
-    ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
-        Ppo::act_batch(self, states, stages, masks, deterministic)
-    }
 }
 
 /// Environments stepped together.
@@ -147,8 +140,8 @@ impl<E: crm::Environment + Send> VecEnv<E> {
         self.slots.is_empty()
     }
 
-    /// Steps every environment `steps_per_env` times with the policy of `ppo`.
-    pub fn collect<A: Actor>(&mut self, ppo: &mut A, steps_per_env: usize) -> Result<Rollout> {
+    /// Steps every environment `steps_per_env` times with the policy of `actor`.
+    pub fn collect<A: Actor>(&mut self, actor: &mut A, steps_per_env: usize) -> Result<Rollout> {
         let base_seed = self.base_seed;
         for _ in 0..steps_per_env {
             let states: Vec<Vec<f32>> = self.slots.iter().map(|s| s.state.clone()).collect();
@@ -158,7 +151,7 @@ impl<E: crm::Environment + Send> VecEnv<E> {
                 .iter()
                 .map(|s| s.env.machine().action_mask(s.stage))
                 .collect();
-            let (actions, log_probs) = ppo.act_batch(&states, &stages, &masks, false)?;
+            let (actions, log_probs) = actor.act_batch(&states, &stages, &masks, false)?;
             self.slots
                 .par_iter_mut()
                 .enumerate()
@@ -185,6 +178,8 @@ impl<E: crm::Environment + Send> VecEnv<E> {
                     b.transition.push(step.transition_reward);
                     b.terminal.push(step.done);
                     b.last.push(last);
+                    b.ended.push(last);
+                    b.env.push(k);
                     if last {
                         let success =
                             step.done && slot.env.machine().stage_name(step.stage) == "success";

@@ -30,14 +30,18 @@ pub mod events;
 pub mod hand;
 pub mod observation;
 pub mod oracle;
+pub mod ready;
 pub mod scene;
+pub mod script;
 pub mod spec;
 pub mod view;
 
 pub use benchmark::Benchmark;
-pub use config::{Randomization, SimConfig};
+pub use config::{FingerActions, Protocol, Randomization, SimConfig};
 pub use env::{GraspEnv, TaskChoice};
 pub use error::{Error, Result};
 
 /// Version of the environment's dynamics and observation layout; checkpoints record it.
-pub const ENV_VERSION: &str = concat!("grasp-sim/", env!("CARGO_PKG_VERSION"), "/obs38");
+/// `v2`: the paper's ready test and scripted objective execution, and policies that carry
+/// their observation normalizer.
+pub const ENV_VERSION: &str = concat!("grasp-sim/", env!("CARGO_PKG_VERSION"), "/obs38/v2");

@@ -1,21 +1,18 @@
 //! A scripted grasping controller with privileged state (no learning): it proves the physics
 //! can grasp. It moves to the task's grasp location from above, closes to the topology's
 //! shape while regulating the grip under the object's force limit, then performs the
-//! objective: lift (or lift along the task's motion), twist along the tangent, or press down.
+//! objective with the arm's controllers of `script.rs`. Under the paper's protocol the
+//! environment runs those controllers itself once the grasp is ready, inside a close step.
 
 use crate::benchmark::Objective;
 use crate::env::GraspEnv;
 use crate::observation::ACTIONS;
+use crate::script::GRASP_SCALE;
 
-/// Approach and grasp step scales of the grasping spec (m per unit action, rad per unit).
+/// Approach step scale of the grasping spec (m per unit action).
 const APPROACH_SCALE: f32 = 0.01;
-const GRASP_SCALE: f32 = 0.003;
 /// Height (m) above the grasp location at which the hand travels before descending.
 const CLEARANCE: f32 = 0.06;
-/// Fraction of the grasp step used to move a held object (slower swings less).
-const LIFT_SPEED: f32 = 0.6;
-/// Height (m) above the success test's lift height to which a held object is raised.
-const LIFT_MARGIN: f32 = 0.02;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Phase {
@@ -80,12 +77,10 @@ impl Oracle {
         self.phase_steps += 1;
         let task = env.task();
         let object = env.benchmark().object_of(task);
-        let shape = task.topology.shape();
+        let shape = env.topology().shape();
         let limit = object.fragility.grasp_force_limit();
         let grip = parts.grip * limit;
-        let friction = 0.5 * (1.0 + object.friction);
-        let weight = object.mass * 9.81;
-        let wanted_grip = (3.0 * weight / friction).clamp(6.0, 0.55 * limit);
+        let wanted_grip = crate::script::wanted_grip(env);
         match self.phase {
             Phase::Align => {
                 action[0] = unit(rel[0], GRASP_SCALE);
@@ -128,56 +123,7 @@ impl Oracle {
                     self.enter(Phase::Act);
                 }
             }
-            Phase::Act => {
-                // Keep the grip between the wanted value and the fragility limit.
-                for finger in 0..5 {
-                    if shape[finger].active && task.objective != Objective::Press {
-                        action[3 + finger] = if grip > 0.8 * limit {
-                            -0.3
-                        } else if grip < 0.8 * wanted_grip {
-                            0.3
-                        } else {
-                            0.0
-                        };
-                    }
-                }
-                let start_yaw = env
-                    .scene()
-                    .map(|s| s.object_start.rotation)
-                    .unwrap_or_default();
-                let motion =
-                    start_yaw * rapier3d::prelude::Vec3::from(task.motion).normalize_or_zero();
-                match task.objective {
-                    Objective::Press => {
-                        let required = task.required.unwrap_or(0.0).abs();
-                        let press = -parts.force[2];
-                        let dz = if press > 0.7 * limit {
-                            0.5
-                        } else if press < 1.3 * required {
-                            -0.5
-                        } else {
-                            0.0
-                        };
-                        action[2] = dz;
-                    }
-                    Objective::Twist => {
-                        for axis in 0..3 {
-                            action[axis] = 0.5 * motion[axis];
-                        }
-                    }
-                    _ => {
-                        // Lift (along the task's motion) until the object stands clear of the
-                        // success height: a rule on an observed quantity (the object's
-                        // displacement), not on a step count, so a policy cloned from the
-                        // oracle can tell from its observation when to stop.
-                        if parts.object[2] < env.config().lift_height + LIFT_MARGIN {
-                            for axis in 0..3 {
-                                action[axis] = LIFT_SPEED * motion[axis];
-                            }
-                        }
-                    }
-                }
-            }
+            Phase::Act => return crate::script::objective_action(env, wanted_grip),
         }
         action
     }
@@ -189,8 +135,11 @@ pub struct OracleEpisode {
     pub task: usize,
     pub seed: u64,
     pub success: bool,
-    /// Control steps until the episode ended.
+    /// Control steps of the controller until the episode ended (under the scripted protocol
+    /// the arm's execution runs inside one of them).
     pub steps: usize,
+    /// Simulated seconds of the episode, the arm's scripted execution included.
+    pub sim_seconds: f32,
     /// The terminal stage reached, or `truncated`.
     pub outcome: String,
     /// Why the grasp failed, when it did.
@@ -228,6 +177,7 @@ pub fn run_episode(
         seed,
         success: outcome == "success",
         steps,
+        sim_seconds: crm_env.env().sim_seconds(),
         fail_cause: if outcome == "failure" {
             crm_env.env().last_fail()
         } else {

@@ -368,7 +368,10 @@ mod tests {
             seed: 0,
             success_rate: s,
             mean_episode_length: l,
+            mean_sim_seconds: 0.0,
+            objective: Default::default(),
             per_objective: BTreeMap::new(),
+            outcomes: BTreeMap::new(),
         };
         let (a, b, c) = (report(0.5, 100.0), report(0.9, 120.0), report(0.9, 90.0));
         let best = best(&[Some(&a), None, Some(&b), Some(&c)], &[]);
@@ -405,7 +408,10 @@ mod tests {
             seed: 0,
             success_rate: 0.0,
             mean_episode_length: 0.0,
+            mean_sim_seconds: 0.0,
+            objective: Default::default(),
             per_objective: BTreeMap::new(),
+            outcomes: BTreeMap::new(),
         };
         (job, report)
     }

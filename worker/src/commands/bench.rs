@@ -23,9 +23,20 @@ pub enum BenchCommand {
 pub struct LearnBenchArgs {
     #[command(flatten)]
     pub env: EnvArgs,
-    /// Rollout steps to time (over all environments).
-    #[arg(long, default_value_t = 2048)]
-    pub steps: usize,
+    /// PPO settings (JSON, any `PpoConfig` field): the batch geometry to time. The KL guard
+    /// is off while timing, so every epoch runs.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<std::path::PathBuf>,
+    /// Rollout steps per iteration (over all environments); default: the config's.
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Iterations (rollout then update) timed end to end.
+    #[arg(long, default_value_t = 2)]
+    pub iterations: usize,
+    /// Start from this CRM-PPO checkpoint's policy (a trained policy grasps, so its episodes
+    /// include the arm's scripted executions, as late in training); default: untrained.
+    #[arg(long, value_name = "FILE")]
+    pub checkpoint: Option<std::path::PathBuf>,
     /// Environments stepped in parallel (default: one per core).
     #[arg(long)]
     pub envs: Option<usize>,
@@ -37,8 +48,16 @@ pub struct LearnBenchArgs {
 struct LearnReport {
     envs: usize,
     rollout_steps: usize,
+    iterations: usize,
     rollout_steps_per_sec: f64,
     update_samples_per_sec: f64,
+    /// Environment steps per second of whole training iterations (rollout and update).
+    end_to_end_steps_per_sec: f64,
+    /// Share of the iterations' wall time spent in the update.
+    update_share: f64,
+    /// Shares of the update's wall time: preparation (values, GAE, encoding), permutation
+    /// gathers, forward and backward passes, the fused optimizer, reading statistics back.
+    update_breakdown: std::collections::BTreeMap<&'static str, f64>,
     update_epochs: usize,
     minibatch_size: usize,
     hidden: Vec<usize>,
@@ -179,7 +198,12 @@ fn env(args: EnvBenchArgs) -> anyhow::Result<()> {
 fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
     let benchmark = args.env.benchmark()?;
     let machine = args.env.machine()?;
-    let config = crm_learn::PpoConfig::default();
+    let mut config: crm_learn::PpoConfig = super::read_json(&args.config)?;
+    config.target_kl = 0.0;
+    if let Some(steps) = args.steps {
+        config.rollout_steps = steps;
+    }
+    config.validate()?;
     let env_count = args.envs.unwrap_or_else(rayon::current_num_threads).max(1);
     let envs = (0..env_count)
         .map(|_| {
@@ -192,13 +216,32 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
         .collect();
     let mut envs = crm_learn::VecEnv::new(envs, 1)?;
     let mut ppo = crm_learn::Ppo::new(crm_learn::Layout::of(&machine), config.clone(), 1)?;
-    let per_env = args.steps.div_ceil(env_count).max(1);
-    let start = Instant::now();
-    let rollout = envs.collect(&mut ppo, per_env)?;
-    let rollout_secs = start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    ppo.update(&rollout, 0.0)?;
-    let update_secs = start.elapsed().as_secs_f64();
+    if let Some(path) = &args.checkpoint {
+        let (net, _) =
+            crm_learn::Checkpoint::load(path, &machine.spec().hash(), grasp_sim::ENV_VERSION)?;
+        ppo.load_weights(&net)?;
+    }
+    let per_env = config.rollout_steps.div_ceil(env_count).max(1);
+    let (mut rollout_secs, mut update_secs, mut steps, mut samples) = (0.0, 0.0, 0, 0);
+    let mut timing = crm_learn::UpdateTiming::default();
+    let mut rollout = crm_learn::Rollout::default();
+    for _ in 0..args.iterations.max(1) {
+        let start = Instant::now();
+        rollout = envs.collect(&mut ppo, per_env)?;
+        rollout_secs += start.elapsed().as_secs_f64();
+        let start = Instant::now();
+        let stats = ppo.update(&rollout, 0.0)?;
+        update_secs += start.elapsed().as_secs_f64();
+        timing.prepare += stats.timing.prepare;
+        timing.shuffle += stats.timing.shuffle;
+        timing.forward_backward += stats.timing.forward_backward;
+        timing.optimizer += stats.timing.optimizer;
+        timing.bookkeeping += stats.timing.bookkeeping;
+        steps += rollout.len();
+        // Every minibatch but an epoch's last is full.
+        samples += rollout.len() * stats.minibatches
+            / rollout.len().div_ceil(config.minibatch_size).max(1);
+    }
     let sac_config = crm_api::SacConfig {
         learning_starts: 0,
         ..crm_api::SacConfig::default()
@@ -220,8 +263,21 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
     let report = LearnReport {
         envs: env_count,
         rollout_steps: rollout.len(),
-        rollout_steps_per_sec: rollout.len() as f64 / rollout_secs,
-        update_samples_per_sec: (rollout.len() * config.update_epochs) as f64 / update_secs,
+        iterations: args.iterations.max(1),
+        rollout_steps_per_sec: steps as f64 / rollout_secs,
+        update_samples_per_sec: samples as f64 / update_secs,
+        end_to_end_steps_per_sec: steps as f64 / (rollout_secs + update_secs),
+        update_share: update_secs / (rollout_secs + update_secs),
+        update_breakdown: [
+            ("prepare", timing.prepare),
+            ("shuffle", timing.shuffle),
+            ("forward_backward", timing.forward_backward),
+            ("optimizer", timing.optimizer),
+            ("bookkeeping", timing.bookkeeping),
+        ]
+        .into_iter()
+        .map(|(name, secs)| (name, secs / update_secs))
+        .collect(),
         update_epochs: config.update_epochs,
         minibatch_size: config.minibatch_size,
         hidden: config.hidden,

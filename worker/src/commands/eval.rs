@@ -37,6 +37,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         tasks: args.task.clone(),
         topology: args.topology.clone(),
         record: None,
+        objective: args.env.objective,
     };
     let report = evaluate(&args.checkpoint, &spec, &args.env, None, |_, _, _| true)?;
     if args.json {

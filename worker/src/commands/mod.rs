@@ -16,6 +16,7 @@ use std::sync::Arc;
 use std::io::Write;
 
 use anyhow::Context;
+use crm_api::ObjectiveMode;
 use grasp_sim::{Benchmark, SimConfig};
 
 /// Options every environment-running command shares.
@@ -30,6 +31,30 @@ pub struct EnvArgs {
     /// Turn domain randomization off (it is on by default, as in the paper).
     #[arg(long)]
     pub no_randomization: bool,
+    /// Who executes the objective once the grasp is ready (a job's `objective`):
+    /// `scripted`, the paper's protocol (the arm, by script), or `learned` (the policy).
+    #[arg(long = "protocol", value_enum, default_value_t = ObjectiveMode::Scripted)]
+    pub objective: ObjectiveMode,
+    /// How finger actions act: `closing` only (the authors' code, the default), or `signed`
+    /// increments that also open the hand.
+    #[arg(long, value_enum, default_value_t = FingerMode::Closing)]
+    pub finger_actions: FingerMode,
+}
+
+/// `--finger-actions`: see [`grasp_sim::FingerActions`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum FingerMode {
+    #[default]
+    Closing,
+    Signed,
+}
+
+/// The world's protocol for a job's objective mode.
+pub fn protocol(mode: ObjectiveMode) -> grasp_sim::Protocol {
+    match mode {
+        ObjectiveMode::Scripted => grasp_sim::Protocol::Scripted,
+        ObjectiveMode::Learned => grasp_sim::Protocol::Learned,
+    }
 }
 
 impl EnvArgs {
@@ -55,12 +80,25 @@ impl EnvArgs {
         Ok(crm::Machine::from_spec(spec)?)
     }
 
+    /// The world's settings; a job's `objective` decides the protocol (see
+    /// [`Self::config_for`]).
     pub fn config(&self) -> SimConfig {
-        if self.no_randomization {
+        self.config_for(self.objective)
+    }
+
+    /// The world's settings with the protocol of `objective`.
+    pub fn config_for(&self, objective: ObjectiveMode) -> SimConfig {
+        let mut config = if self.no_randomization {
             SimConfig::deterministic()
         } else {
             SimConfig::default()
-        }
+        };
+        config.protocol = protocol(objective);
+        config.finger_actions = match self.finger_actions {
+            FingerMode::Signed => grasp_sim::FingerActions::Signed,
+            FingerMode::Closing => grasp_sim::FingerActions::Closing,
+        };
+        config
     }
 }
 

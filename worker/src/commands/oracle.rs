@@ -47,8 +47,12 @@ struct Report {
     per_objective: BTreeMap<String, Group>,
     per_task: BTreeMap<String, Group>,
     outcomes: BTreeMap<String, usize>,
+    /// Control steps of the controller (the arm's scripted execution runs inside one).
     mean_episode_steps: f64,
+    /// Simulated seconds, the scripted execution included.
     mean_episode_seconds: f64,
+    /// `scripted` (the paper's protocol) or `learned`.
+    objective: &'static str,
     randomization: bool,
 }
 
@@ -68,7 +72,6 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
     let benchmark = args.env.benchmark()?;
     let machine = args.env.machine()?;
     let config = args.env.config();
-    let control_dt = f64::from(config.control_dt());
     let selected: Vec<usize> = if args.tasks.is_empty() {
         (0..benchmark.tasks.len()).collect()
     } else {
@@ -134,7 +137,12 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         per_task,
         outcomes,
         mean_episode_steps: mean_steps,
-        mean_episode_seconds: mean_steps * control_dt,
+        objective: args.env.objective.name(),
+        mean_episode_seconds: episodes
+            .iter()
+            .map(|e| f64::from(e.sim_seconds))
+            .sum::<f64>()
+            / episodes.len().max(1) as f64,
         randomization: config.randomization.enabled,
     };
     if args.json {

@@ -73,6 +73,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         tasks: Vec::new(),
         topology: args.topology.clone(),
         record: Some(record),
+        objective: args.env.objective,
     };
     let mut episode = None;
     evaluate(

@@ -122,7 +122,7 @@ pub fn imitate(
     let benchmark = env.benchmark()?;
     let machine = env.machine()?;
     let choice = EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
-    let config = env.config();
+    let config = env.config_for(spec.objective);
     let source = DemoSource {
         benchmark: &benchmark,
         config: &config,

@@ -124,11 +124,13 @@ pub fn evaluate(
     let mut policy = LoadedPolicy::load(path, env)?;
     let (algorithm, trained_steps) = (policy.algorithm.clone(), policy.trained_steps);
     let machine = policy.machine.clone();
-    let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
+    let mut grasp = GraspEnv::new(benchmark.clone(), env.config_for(spec.objective));
     super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?.apply(&mut grasp)?;
     let recorded = crate::record::Recorded::new(grasp, machine.clone(), recorder);
     let mut crm_env = crm::CrmEnv::new(machine, recorded, crm::RewardMode::Crm);
-    let mut sums: BTreeMap<Objective, (u64, u64, u64)> = BTreeMap::new();
+    // Per objective: episodes, successes, control steps, simulated seconds.
+    let mut sums: BTreeMap<Objective, (u64, u64, u64, f64)> = BTreeMap::new();
+    let mut outcomes: BTreeMap<String, u64> = BTreeMap::new();
     for k in 0..spec.episodes {
         let seed = spec.seed.wrapping_mul(1_000_003).wrapping_add(k);
         let (mut stage, mut state) = crm_env.reset(seed).context("reset")?;
@@ -138,7 +140,13 @@ pub fn evaluate(
             let action = policy.act(&state, stage, &mask)?;
             let step = crm_env.step(&action)?;
             if step.done || step.truncated {
-                let success = step.done && crm_env.machine().stage_name(step.stage) == "success";
+                let end = if step.done {
+                    crm_env.machine().stage_name(step.stage)
+                } else {
+                    "truncated"
+                };
+                *outcomes.entry(end.to_string()).or_default() += 1;
+                let success = end == "success";
                 break (success, crm_env.episode().steps());
             }
             (stage, state) = (step.stage, step.abstract_state);
@@ -147,6 +155,7 @@ pub fn evaluate(
         entry.0 += 1;
         entry.1 += u64::from(success);
         entry.2 += length as u64;
+        entry.3 += f64::from(crm_env.env().inner().sim_seconds());
         let machine = crm_env.machine();
         let episode = crm_env.episode();
         let record = EpisodeRecord {
@@ -172,14 +181,15 @@ pub fn evaluate(
             bail!("cancelled after {} of {} episodes", k + 1, spec.episodes);
         }
     }
-    let row = |(n, wins, length): (u64, u64, u64)| Row {
+    let row = |(n, wins, length, seconds): (u64, u64, u64, f64)| Row {
         success_rate: wins as f64 / n.max(1) as f64,
         mean_episode_length: length as f64 / n.max(1) as f64,
         episodes: n,
+        mean_sim_seconds: seconds / n.max(1) as f64,
     };
-    let total = sums
-        .values()
-        .fold((0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+    let total = sums.values().fold((0, 0, 0, 0.0), |a, b| {
+        (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3)
+    });
     let overall = row(total);
     Ok(EvalReport {
         algorithm,
@@ -188,9 +198,12 @@ pub fn evaluate(
         seed: spec.seed,
         success_rate: overall.success_rate,
         mean_episode_length: overall.mean_episode_length,
+        mean_sim_seconds: overall.mean_sim_seconds,
+        objective: spec.objective,
         per_objective: sums
             .into_iter()
             .map(|(o, s)| (o.name().to_string(), row(s)))
             .collect(),
+        outcomes,
     })
 }

@@ -124,7 +124,7 @@ impl Trainer {
         };
         let envs = (0..env_count)
             .map(|k| {
-                let mut grasp = GraspEnv::new(benchmark.clone(), env.config());
+                let mut grasp = GraspEnv::new(benchmark.clone(), env.config_for(spec.objective));
                 choice.apply(&mut grasp)?;
                 let recorder = if k == 0 { recorder.clone() } else { None };
                 Ok(crm::CrmEnv::new(
@@ -219,6 +219,7 @@ impl Trainer {
                     approx_kl: 0.0,
                     clipfrac: 0.0,
                     learning_rate: self.spec.sac.learning_rate,
+                    ..crm_learn::UpdateStats::default()
                 };
                 (rollout, stats)
             }

@@ -7,13 +7,15 @@ use rand_chacha::ChaCha8Rng;
 use rapier3d::prelude::*;
 
 use crate::benchmark::{Benchmark, Objective, Task, Topology};
-use crate::config::SimConfig;
+use crate::config::{FingerActions, Protocol, SimConfig};
 use crate::contacts::{ContactMetrics, object_contacts};
 use crate::error::{Error, Result};
 use crate::events::{FailCause, Judge, Snapshot};
 use crate::hand::{HAND_GROUP, max_flex};
 use crate::observation::{ACTIONS, MAX_FINGER_STEP, MAX_PALM_STEP, ObservationParts};
 use crate::scene::{self, Scene};
+
+mod execute;
 
 /// Which task an episode runs.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -38,6 +40,10 @@ pub struct GraspEnv {
     judge: Option<Judge>,
     stage: String,
     steps: usize,
+    /// Control steps of simulated time in this episode, the scripted execution's included.
+    sim_steps: usize,
+    /// Whether the arm executed the objective in this episode (scripted protocol).
+    executed: bool,
     clipped: u64,
     hand_contacts: ContactMetrics,
     parts: ObservationParts,
@@ -57,6 +63,8 @@ impl GraspEnv {
             judge: None,
             stage: "approach".to_string(),
             steps: 0,
+            sim_steps: 0,
+            executed: false,
             clipped: 0,
             hand_contacts: ContactMetrics::default(),
             parts: ObservationParts::default(),
@@ -128,9 +136,19 @@ impl GraspEnv {
         self.scene.as_ref()
     }
 
-    /// Control steps taken in this episode.
+    /// Control steps the policy took in this episode.
     pub fn steps(&self) -> usize {
         self.steps
+    }
+
+    /// Simulated seconds of this episode, the arm's scripted execution included.
+    pub fn sim_seconds(&self) -> f32 {
+        self.sim_steps as f32 * self.config.control_dt()
+    }
+
+    /// Whether the arm executed the objective by script in this episode.
+    pub fn executed(&self) -> bool {
+        self.executed
     }
 
     /// Action values clipped since this environment was made.
@@ -187,6 +205,8 @@ impl GraspEnv {
         self.scene = Some(scene);
         self.judge = Some(judge);
         self.steps = 0;
+        self.sim_steps = 0;
+        self.executed = false;
         self.last_fail = None;
         self.hand_contacts = ContactMetrics::default();
         self.observe(&ContactMetrics::default())?;
@@ -223,11 +243,11 @@ impl GraspEnv {
     }
 
     /// One control step with a union-space action (palm metres, finger radians); returns the
-    /// observation, the events that hold and whether the time limit was hit.
+    /// observation, the events that hold and whether the time limit was hit. Under the
+    /// scripted protocol a step whose grasp is ready goes on with the arm executing the
+    /// objective (see `execute.rs`) and returns the events of its last control step.
     pub fn step_action(&mut self, action: &[f32]) -> Result<crm::EnvStep> {
         Self::check_action(action)?;
-        let shape = self.topology().shape();
-        let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
         let mut clipped = 0u64;
         let mut clip = |value: f32, limit: f32| {
             let bounded = value.clamp(-limit, limit);
@@ -241,16 +261,51 @@ impl GraspEnv {
             clip(action[1], MAX_PALM_STEP),
             clip(action[2], MAX_PALM_STEP),
         );
-        for finger in 0..5 {
+        let closing = self.closing_fingers();
+        let fingers: [f32; 5] = std::array::from_fn(|finger| {
             let step = clip(action[3 + finger], MAX_FINGER_STEP);
+            if closing { step.abs() } else { step }
+        });
+        self.clipped += clipped;
+        self.move_fingers(&fingers)?;
+        let mut events = self.advance(delta)?;
+        self.steps += 1;
+        if self.should_execute(&events) || self.closed_fully(&events) {
+            events = self.execute_objective()?;
+        }
+        Ok(crm::EnvStep {
+            observation: self.parts.to_vec(),
+            events,
+            truncated: self.steps >= self.config.max_episode_steps,
+        })
+    }
+
+    /// Whether finger actions only close. Closing-only fingers are the scripted protocol's:
+    /// under the learned one the policy must also be able to ease its grip while it lifts.
+    fn closing_fingers(&self) -> bool {
+        self.config.finger_actions == FingerActions::Closing
+            && self.config.protocol == Protocol::Scripted
+    }
+
+    /// Adds increments (rad) to the active fingers' commands, within the topology's
+    /// preshape and the joints' range.
+    fn move_fingers(&mut self, increments: &[f32; 5]) -> Result<()> {
+        let shape = self.topology().shape();
+        let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
+        for (finger, &step) in increments.iter().enumerate() {
             if shape[finger].active && step != 0.0 {
                 let command = (scene.hand.commands[finger] + step)
                     .clamp(shape[finger].preshape, max_flex(finger));
                 scene.hand.set_command(&mut scene.world, finger, command);
             }
         }
-        self.clipped += clipped;
+        Ok(())
+    }
 
+    /// Moves the arm by `delta` over one control step's physics steps and observes; returns
+    /// the events that hold after it.
+    fn advance(&mut self, delta: Vec3) -> Result<Vec<&'static str>> {
+        let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
         let start = self.mount_target;
         // Keep the arm above the table and near the workspace.
         let target = (start + delta).clamp(Vec3::new(-0.4, -0.4, 0.02), Vec3::new(0.4, 0.4, 0.6));
@@ -277,14 +332,10 @@ impl GraspEnv {
         last.force = averaged.force;
         last.torque = averaged.torque;
         last.grip = averaged.grip;
-        self.steps += 1;
+        self.sim_steps += 1;
         let events = self.observe(&last)?;
         self.hand_contacts = last;
-        Ok(crm::EnvStep {
-            observation: self.parts.to_vec(),
-            events,
-            truncated: self.steps >= self.config.max_episode_steps,
-        })
+        Ok(events)
     }
 
     /// Computes the observation parts and the events from the world's current state.

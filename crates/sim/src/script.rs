@@ -1,0 +1,99 @@
+//! The arm's objective controllers: what the arm does once the grasp is ready (the paper's
+//! protocol runs them inside the environment step; the oracle runs them as its last phase).
+//! Lift (along the task's motion) to just above the success height, twist along the
+//! tangent, or press down under force regulation. The fingers keep the grasp they were
+//! given: they open a little when the grip nears the fragility limit and close a little when
+//! it relaxes under 80% of the grip they are to `hold` (the grip at the hand-over for the
+//! environment's execution, [`wanted_grip`] for the oracle). A loose grasp stays loose.
+
+use rapier3d::prelude::Vec3;
+
+use crate::benchmark::Objective;
+use crate::env::GraspEnv;
+use crate::observation::ACTIONS;
+
+/// Step scales of the grasping spec's grasp stage: palm metres and finger radians per unit
+/// action.
+pub const GRASP_SCALE: f32 = 0.003;
+pub const FINGER_SCALE: f32 = 0.1;
+/// Fraction of the grasp step used to move a held object (slower swings less).
+const LIFT_SPEED: f32 = 0.6;
+/// Height (m) above the success test's lift height to which a held object is raised.
+const LIFT_MARGIN: f32 = 0.02;
+
+fn unit(value: f32, scale: f32) -> f32 {
+    (value / scale).clamp(-1.0, 1.0)
+}
+
+/// The grip (N) the controllers aim for: three times what the weight needs through
+/// friction, at least 6 N, at most 55% of the fragility limit.
+pub fn wanted_grip(env: &GraspEnv) -> f32 {
+    let object = env.benchmark().object_of(env.task());
+    let friction = 0.5 * (1.0 + object.friction);
+    let weight = object.mass * 9.81;
+    (3.0 * weight / friction).clamp(6.0, 0.55 * object.fragility.grasp_force_limit())
+}
+
+/// The arm's next action for the current task's objective, in the grasp stage's units
+/// (`[-1, 1]` per dimension; see [`GRASP_SCALE`] and [`FINGER_SCALE`]); the fingers close
+/// when the grip falls under 80% of `hold` (N).
+pub fn objective_action(env: &GraspEnv, hold: f32) -> Vec<f32> {
+    let mut action = vec![0.0; ACTIONS.len()];
+    let parts = env.observation_parts();
+    let task = env.task();
+    let shape = env.topology().shape();
+    let limit = env
+        .benchmark()
+        .object_of(task)
+        .fragility
+        .grasp_force_limit();
+    let grip = parts.grip * limit;
+    // Keep the grip under the fragility limit and near the grip to hold.
+    for finger in 0..5 {
+        if shape[finger].active && task.objective != Objective::Press {
+            action[3 + finger] = if grip > 0.8 * limit {
+                -0.3
+            } else if grip < 0.8 * hold {
+                0.3
+            } else {
+                0.0
+            };
+        }
+    }
+    let start_yaw = env
+        .scene()
+        .map(|s| s.object_start.rotation)
+        .unwrap_or_default();
+    let motion = start_yaw * Vec3::from(task.motion).normalize_or_zero();
+    match task.objective {
+        Objective::Press => {
+            // Centre the palm over the button while pressing.
+            action[0] = unit(parts.relative[0], GRASP_SCALE);
+            action[1] = unit(parts.relative[1], GRASP_SCALE);
+            let required = task.required.unwrap_or(0.0).abs();
+            let press = -parts.force[2];
+            action[2] = if press > 0.7 * limit {
+                0.5
+            } else if press < 1.3 * required {
+                -0.5
+            } else {
+                0.0
+            };
+        }
+        Objective::Twist => {
+            for axis in 0..3 {
+                action[axis] = 0.5 * motion[axis];
+            }
+        }
+        _ => {
+            // Lift until the object stands clear of the success height: a rule on an
+            // observed quantity, so a policy cloned from the oracle can tell when to stop.
+            if parts.object[2] < env.config().lift_height + LIFT_MARGIN {
+                for axis in 0..3 {
+                    action[axis] = LIFT_SPEED * motion[axis];
+                }
+            }
+        }
+    }
+    action
+}

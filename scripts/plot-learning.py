@@ -1,0 +1,58 @@
+"""Draws docs/learning/*.png from the metric logs in docs/learning/ (crm train's metrics.jsonl).
+
+Usage: python3 scripts/plot-learning.py   (needs matplotlib: pip install matplotlib)
+"""
+
+import json
+import pathlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs" / "learning"
+
+
+def load(name):
+    return [json.loads(line) for line in (DOCS / name).read_text().splitlines() if line.strip()]
+
+
+def curve(ax, rows, x, label):
+    xs = [r[x] / (60.0 if x == "wall_s" else 1e6) for r in rows]
+    ax.plot(xs, [r["success_rate_last_100"] for r in rows], label=label)
+
+
+def main():
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    ax = axes[0]
+    for name, label in [
+        ("benchmark-h.metrics.jsonl", "the shipped run (h)"),
+        ("benchmark-g.metrics.jsonl", "run g (earlier rules)"),
+    ]:
+        if (DOCS / name).exists():
+            curve(ax, load(name), "wall_s", label)
+    ax.set_xlabel("wall-clock minutes, 2 cores")
+    ax.set_ylabel("success rate, last 100 training episodes")
+    ax.set_title("CRM-PPO from scratch, all 26 tasks")
+    ax.set_ylim(0, 1)
+    ax.grid(alpha=0.3)
+    ax.legend()
+
+    ax = axes[1]
+    for name, label in [
+        ("box-lift-closing.metrics.jsonl", "closing-only fingers"),
+        ("box-lift-signed.metrics.jsonl", "signed finger increments"),
+    ]:
+        curve(ax, load(name), "steps", label)
+    ax.set_xlabel("environment steps (millions)")
+    ax.set_title("box-lift, seed 0: finger actions")
+    ax.set_ylim(0, 1)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(DOCS / "curves.png", dpi=110)
+
+
+if __name__ == "__main__":
+    main()
