@@ -53,6 +53,13 @@ fn bad_input_is_refused_with_a_message_and_exit_code_2() {
     let (code, _, stderr) = crm(&["oracle", "--task", "teapot-lift"]);
     assert_eq!(code, 2);
     assert!(stderr.contains("unknown task \"teapot-lift\""), "{stderr}");
+    // An unknown protocol is refused naming the flag and the choices.
+    let (code, _, stderr) = crm(&["oracle", "--protocol", "telekinesis"]);
+    assert_eq!(code, 2);
+    assert!(
+        stderr.contains("--protocol") && stderr.contains("scripted, learned"),
+        "{stderr}"
+    );
 
     let dir = std::env::temp_dir().join(format!("crm-cli-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");

@@ -44,7 +44,8 @@ pub struct PpoConfig {
     pub early_stop_success: f32,
     pub early_stop_window: usize,
     /// KL guard: an update stops its epochs at the first minibatch whose approximate KL
-    /// exceeds 1.5 x this (stable-baselines3's `target_kl` rule); 0 turns it off. 0.02.
+    /// exceeds 1.5 x this (stable-baselines3's `target_kl` rule); 0 turns it off. 0.02, our
+    /// value (SB3 leaves the guard off by default).
     pub target_kl: f32,
     /// Initial log standard deviation of the policy. CleanRL's continuous PPO: 0.
     pub init_log_std: f32,

@@ -37,7 +37,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         tasks: args.task.clone(),
         topology: args.topology.clone(),
         record: None,
-        objective: args.env.objective,
+        objective: args.env.protocol,
     };
     let report = evaluate(&args.checkpoint, &spec, &args.env, None, |_, _, _| true)?;
     if args.json {

@@ -33,8 +33,8 @@ pub struct EnvArgs {
     pub no_randomization: bool,
     /// Who executes the objective once the grasp is ready (a job's `objective`):
     /// `scripted`, the paper's protocol (the arm, by script), or `learned` (the policy).
-    #[arg(long = "protocol", value_enum, default_value_t = ObjectiveMode::Scripted)]
-    pub objective: ObjectiveMode,
+    #[arg(long, value_enum, default_value_t = ObjectiveMode::Scripted)]
+    pub protocol: ObjectiveMode,
     /// How finger actions act: `closing` only (the authors' code, the default), or `signed`
     /// increments that also open the hand.
     #[arg(long, value_enum, default_value_t = FingerMode::Closing)]
@@ -83,7 +83,7 @@ impl EnvArgs {
     /// The world's settings; a job's `objective` decides the protocol (see
     /// [`Self::config_for`]).
     pub fn config(&self) -> SimConfig {
-        self.config_for(self.objective)
+        self.config_for(self.protocol)
     }
 
     /// The world's settings with the protocol of `objective`.

@@ -137,7 +137,7 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         per_task,
         outcomes,
         mean_episode_steps: mean_steps,
-        objective: args.env.objective.name(),
+        objective: args.env.protocol.name(),
         mean_episode_seconds: episodes
             .iter()
             .map(|e| f64::from(e.sim_seconds))

@@ -73,7 +73,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         tasks: Vec::new(),
         topology: args.topology.clone(),
         record: Some(record),
-        objective: args.env.objective,
+        objective: args.env.protocol,
     };
     let mut episode = None;
     evaluate(

@@ -90,7 +90,7 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
             sac: sac.clone(),
             record: None,
             imitation: None,
-            objective: args.env.objective,
+            objective: args.env.protocol,
         };
         let started = Instant::now();
         let mut trainer = Trainer::new(spec, &args.env, None, None)?;
@@ -119,7 +119,7 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
             tasks: args.task.clone(),
             topology: None,
             record: None,
-            objective: args.env.objective,
+            objective: args.env.protocol,
         };
         let report = evaluate(&checkpoint, &eval, &args.env, None, |_, _, _| true)?;
         outcomes.push(Outcome {

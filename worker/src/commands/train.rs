@@ -100,7 +100,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         sac,
         record: None,
         imitation,
-        objective: args.env.objective,
+        objective: args.env.protocol,
     };
     let mut trainer = Trainer::new(spec.clone(), &args.env, args.resume.as_deref(), None)?;
     demos::imitate(&spec, &args.env, &mut trainer, |line| {
