@@ -52,15 +52,6 @@ pub enum Protocol {
     Learned,
 }
 
-impl Protocol {
-    pub fn name(self) -> &'static str {
-        match self {
-            Protocol::Scripted => "scripted",
-            Protocol::Learned => "learned",
-        }
-    }
-}
-
 /// How the policy's finger actions move the finger commands.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

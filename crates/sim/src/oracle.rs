@@ -2,7 +2,8 @@
 //! can grasp. It moves to the task's grasp location from above, closes to the topology's
 //! shape while regulating the grip under the object's force limit, then performs the
 //! objective with the arm's controllers of `script.rs`. Under the paper's protocol the
-//! environment runs those controllers itself once the grasp is ready, inside a close step.
+//! environment runs those controllers itself once the grasp is ready, inside the step that
+//! made it ready.
 
 use crate::benchmark::Objective;
 use crate::env::GraspEnv;

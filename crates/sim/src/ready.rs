@@ -52,21 +52,28 @@ pub struct ReadyTest {
     pub part_force: f32,
 }
 
+/// The grip (N) that carries a free object: three times what its weight needs through
+/// friction, at least 6 N, at most 55% of its fragility limit. The ready test asks for it and
+/// the oracle closes to it.
+pub fn carrying_grip(object: &Object) -> f32 {
+    // rapier averages the two friction coefficients (the hand's is 1).
+    let friction = 0.5 * (1.0 + object.friction);
+    let limit = object.fragility.grasp_force_limit();
+    (SAFETY * object.mass * 9.81 / friction).clamp(MIN_GRIP, 0.55 * limit)
+}
+
 impl ReadyTest {
     /// The test for `object` grasped with `topology`.
     pub fn for_object(topology: Topology, object: &Object, part_force: f32) -> Self {
-        // rapier averages the two friction coefficients (the hand's is 1).
-        let friction = 0.5 * (1.0 + object.friction);
-        let limit = object.fragility.grasp_force_limit();
         let need = if object.anchor.is_some() {
             ANCHORED_GRIP
         } else {
-            (SAFETY * object.mass * 9.81 / friction).clamp(MIN_GRIP, 0.55 * limit)
+            carrying_grip(object)
         };
         Self {
             topology,
             need,
-            limit,
+            limit: object.fragility.grasp_force_limit(),
             part_force,
         }
     }

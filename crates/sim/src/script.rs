@@ -25,13 +25,9 @@ fn unit(value: f32, scale: f32) -> f32 {
     (value / scale).clamp(-1.0, 1.0)
 }
 
-/// The grip (N) the controllers aim for: three times what the weight needs through
-/// friction, at least 6 N, at most 55% of the fragility limit.
+/// The grip (N) the oracle closes to: [`crate::ready::carrying_grip`] of the task's object.
 pub fn wanted_grip(env: &GraspEnv) -> f32 {
-    let object = env.benchmark().object_of(env.task());
-    let friction = 0.5 * (1.0 + object.friction);
-    let weight = object.mass * 9.81;
-    (3.0 * weight / friction).clamp(6.0, 0.55 * object.fragility.grasp_force_limit())
+    crate::ready::carrying_grip(env.benchmark().object_of(env.task()))
 }
 
 /// The arm's next action for the current task's objective, in the grasp stage's units
