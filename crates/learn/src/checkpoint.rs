@@ -40,6 +40,15 @@ pub struct CheckpointHeader {
     pub config: serde_json::Value,
 }
 
+/// Parameters as the (name, tensor) pairs a safetensors file stores.
+fn named(
+    params: &[(String, candle_core::Var)],
+) -> impl Iterator<Item = (&str, &candle_core::Tensor)> {
+    params
+        .iter()
+        .map(|(name, var)| (name.as_str(), var.as_tensor()))
+}
+
 /// Saving and loading checkpoints.
 pub struct Checkpoint;
 
@@ -69,9 +78,7 @@ impl Checkpoint {
             ),
         ];
         Self::write(
-            net.params()
-                .iter()
-                .map(|(name, var)| (name.as_str(), var.as_tensor()))
+            named(net.params())
                 .chain(stats.iter().map(|(name, t)| (*name, t)))
                 .collect(),
             header,
@@ -85,14 +92,7 @@ impl Checkpoint {
         header: &CheckpointHeader,
         path: &Path,
     ) -> Result<()> {
-        Self::write(
-            params
-                .iter()
-                .map(|(name, var)| (name.as_str(), var.as_tensor()))
-                .collect(),
-            header,
-            path,
-        )
+        Self::write(named(params).collect(), header, path)
     }
 
     fn write(
@@ -343,11 +343,7 @@ mod tests {
             .to_string();
         assert!(err.contains("not a safetensors file"), "{err}");
         let bare = temp("bare.safetensors");
-        let tensors: Vec<(&str, &candle_core::Tensor)> = net
-            .params()
-            .iter()
-            .map(|(n, v)| (n.as_str(), v.as_tensor()))
-            .collect();
+        let tensors: Vec<_> = named(net.params()).collect();
         safetensors::serialize_to_file(tensors, None, &bare).expect("write");
         let err = Checkpoint::read_header(&bare)
             .expect_err("bare")
@@ -363,8 +359,7 @@ mod tests {
             err.contains("no observation-normalizer statistics"),
             "{err}"
         );
-        std::fs::remove_file(&stale).ok();
-        for p in [path, junk, bare] {
+        for p in [path, junk, bare, stale] {
             std::fs::remove_file(p).ok();
         }
     }

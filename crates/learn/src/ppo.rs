@@ -12,7 +12,7 @@
 
 use std::time::Instant;
 
-use candle_core::{DType, Tensor};
+use candle_core::Tensor;
 
 use crate::error::{Error, Result};
 use crate::gae::{StepRecord, gae, normalize};
@@ -124,19 +124,20 @@ impl Ppo {
         deterministic: bool,
     ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
         let means: Vec<Vec<f32>> = self.net.mean(&self.net.input(states, stages)?)?.to_vec2()?;
-        let log_std: Vec<f32> = self.net.std()?.iter().map(|s| s.ln()).collect();
+        let log_std = self.net.log_std()?;
+        let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
         let mut actions = Vec::with_capacity(means.len());
         let mut log_probs = Vec::with_capacity(means.len());
         for (row, mask) in means.iter().zip(masks) {
             let mut action = Vec::with_capacity(row.len());
             let mut log_prob = 0.0f32;
-            for ((&m, &ls), &live) in row.iter().zip(&log_std).zip(mask) {
+            for (((&m, &ls), &s), &live) in row.iter().zip(&log_std).zip(&std).zip(mask) {
                 let z = if deterministic {
                     0.0
                 } else {
                     self.noise.normal()
                 };
-                action.push(m + ls.exp() * z);
+                action.push(m + s * z);
                 log_prob += live * (-0.5 * z * z - ls - HALF_LOG_TWO_PI);
             }
             actions.push(action);
@@ -294,7 +295,7 @@ impl Ppo {
 
         // approx_kl = mean((ratio - 1) - log ratio) and the clip fraction, as CleanRL, on the
         // host from one read of the log ratios.
-        let log_ratio: Vec<f32> = log_ratio.to_dtype(DType::F32)?.to_vec1()?;
+        let log_ratio: Vec<f32> = log_ratio.to_vec1()?;
         let count = log_ratio.len().max(1) as f32;
         let approx_kl = log_ratio.iter().map(|&l| (l.exp() - 1.0) - l).sum::<f32>() / count;
         let clipfrac = log_ratio

@@ -52,27 +52,25 @@ impl GraspEnv {
     }
 
     /// Whether this step hands over to the arm: the scripted protocol, past the approach,
-    /// nothing decided yet, and the grasp ready.
-    pub(super) fn should_execute(&self, events: &[&str]) -> bool {
+    /// nothing decided yet, and the grasp ready or the hand closed all the way.
+    pub(super) fn hands_over(&self, events: &[&str]) -> bool {
         self.config.protocol == Protocol::Scripted
             && self.stage != "approach"
             && !self.executed
             && !decided(events)
-            && self.grasp_ready(events.contains(&"arrive"))
+            && (self.grasp_ready(events.contains(&"arrive")) || self.closed_fully())
     }
 
-    /// Whether closing-only fingers have all closed fully without a ready grasp: the hand
-    /// can no longer change its grasp, so the arm executes with the grasp there is (a hook
-    /// under a handle, a closed hand pushing a faucet) and the judge decides, instead of
-    /// waiting for the grasp time-out.
-    pub(super) fn closed_fully(&self, events: &[&str]) -> bool {
+    /// Whether closing-only fingers have all closed fully: the hand can no longer change its
+    /// grasp, so the arm executes with the grasp there is (a hook under a handle, a closed
+    /// hand pushing a faucet) and the judge decides, instead of waiting for the grasp
+    /// time-out.
+    fn closed_fully(&self) -> bool {
         let Some(scene) = &self.scene else {
             return false;
         };
         let shape = self.topology().shape();
         self.closing_fingers()
-            && self.stage != "approach"
-            && !decided(events)
             && shape.iter().any(|f| f.active)
             && (0..5)
                 .filter(|&f| shape[f].active)

@@ -270,7 +270,7 @@ impl GraspEnv {
         self.move_fingers(&fingers)?;
         let mut events = self.advance(delta)?;
         self.steps += 1;
-        if self.should_execute(&events) || self.closed_fully(&events) {
+        if self.hands_over(&events) {
             events = self.execute_objective()?;
         }
         Ok(crm::EnvStep {
