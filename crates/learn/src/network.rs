@@ -258,9 +258,9 @@ impl ActorCritic {
         Ok(out)
     }
 
-    /// The policy's log standard deviations, per union dimension.
-    pub fn log_std(&self) -> Result<Vec<f32>> {
-        Ok(self.log_std.as_tensor().to_vec1()?)
+    /// The policy's standard deviations, per union dimension.
+    pub fn std(&self) -> Result<Vec<f32>> {
+        Ok(self.log_std.as_tensor().exp()?.to_vec1()?)
     }
 }
 

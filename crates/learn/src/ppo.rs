@@ -124,20 +124,22 @@ impl Ppo {
         deterministic: bool,
     ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
         let means: Vec<Vec<f32>> = self.net.mean(&self.net.input(states, stages)?)?.to_vec2()?;
-        let log_std = self.net.log_std()?;
-        let std: Vec<f32> = log_std.iter().map(|l| l.exp()).collect();
+        let std = self.net.std()?;
+        // ln(std) rather than the stored log std: the log-probabilities keep the bits the
+        // shipped model and the seeded tests were trained with.
+        let log_std: Vec<f32> = std.iter().map(|s| s.ln()).collect();
         let mut actions = Vec::with_capacity(means.len());
         let mut log_probs = Vec::with_capacity(means.len());
         for (row, mask) in means.iter().zip(masks) {
             let mut action = Vec::with_capacity(row.len());
             let mut log_prob = 0.0f32;
-            for (((&m, &ls), &s), &live) in row.iter().zip(&log_std).zip(&std).zip(mask) {
+            for ((&m, &ls), &live) in row.iter().zip(&log_std).zip(mask) {
                 let z = if deterministic {
                     0.0
                 } else {
                     self.noise.normal()
                 };
-                action.push(m + s * z);
+                action.push(m + ls.exp() * z);
                 log_prob += live * (-0.5 * z * z - ls - HALF_LOG_TWO_PI);
             }
             actions.push(action);
