@@ -27,7 +27,8 @@ def main():
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     ax = axes[0]
     for name, label in [
-        ("benchmark-h.metrics.jsonl", "the shipped run (h)"),
+        ("benchmark-i.metrics.jsonl", "run i, the shipped model: task curriculum (hard tasks drawn more)"),
+        ("benchmark-h.metrics.jsonl", "run h: uniform tasks, lock-step rollouts"),
         ("benchmark-g.metrics.jsonl", "run g (earlier rules)"),
     ]:
         if (DOCS / name).exists():
@@ -37,7 +38,7 @@ def main():
     ax.set_title("CRM-PPO from scratch, all 26 tasks")
     ax.set_ylim(0, 1)
     ax.grid(alpha=0.3)
-    ax.legend()
+    ax.legend(loc="lower right", fontsize=7)
 
     ax = axes[1]
     for name, label in [

@@ -2,7 +2,8 @@
 //! ports with a temporary database, seeded through the REST API with three short training runs
 //! (two seeds of one configuration and another algorithm), their evaluations and evaluations
 //! with forced topologies; then `web/tests/dashboard.mjs` (playwright-core driving Debian's
-//! `/usr/bin/chromium`) loads every page, submits a job through the form and compares runs.
+//! `/usr/bin/chromium`) loads every page, submits a job through the form, compares runs and
+//! deletes one from its page.
 //!
 //! Needs `node`, `npm ci --prefix web` and Chromium (`.ci/run` installs them). Set
 //! `CRM_SKIP_BROWSER=1` to skip on a machine without them; `CRM_SCREENSHOTS=DIR` keeps a PNG
@@ -107,6 +108,6 @@ fn the_dashboard_works_in_chromium() {
         out.status.success(),
         "browser checks failed:\n{stdout}\n{stderr}"
     );
-    assert!(stdout.contains("7 of 7 browser checks passed"), "{stdout}");
+    assert!(stdout.contains("8 of 8 browser checks passed"), "{stdout}");
     println!("{stdout}");
 }

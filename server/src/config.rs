@@ -42,6 +42,10 @@ pub struct ServerConfig {
     /// Episode summaries kept per job.
     #[arg(long, default_value_t = 200)]
     pub episodes_kept: u32,
+    /// Checkpoints kept per job besides its final one (the newest; older ones are removed,
+    /// file and row, unless an evaluation job names them).
+    #[arg(long, default_value_t = 3)]
+    pub keep_checkpoints: u32,
 }
 
 impl Default for ServerConfig {
@@ -58,6 +62,7 @@ impl Default for ServerConfig {
             max_checkpoint_bytes: 256 * 1024 * 1024,
             max_recording_bytes: 1024 * 1024 * 1024,
             episodes_kept: 200,
+            keep_checkpoints: 3,
         }
     }
 }
@@ -74,6 +79,9 @@ impl ServerConfig {
         }
         if self.token.as_deref() == Some("") {
             anyhow::bail!("token: must not be empty");
+        }
+        if self.keep_checkpoints == 0 {
+            anyhow::bail!("keep_checkpoints: must be at least 1 (a job resumes from its newest)");
         }
         if self.max_body_bytes == 0 || self.max_concurrent_requests == 0 {
             anyhow::bail!("max_body_bytes and max_concurrent_requests must be positive");

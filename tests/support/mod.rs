@@ -124,9 +124,11 @@ pub fn start_worker(grpc: &str, extra: &[&str]) -> Proc {
     )
 }
 
-/// A response: status and body.
+/// A response: status, header block and body.
 pub struct Reply {
     pub status: u16,
+    /// The status line and headers, as received.
+    pub head: String,
     pub body: Vec<u8>,
 }
 
@@ -140,6 +142,16 @@ impl Reply {
             )
         })
     }
+
+    /// A response header's value (names compare without case).
+    pub fn header(&self, name: &str) -> Option<String> {
+        self.head.lines().skip(1).find_map(|line| {
+            let (key, value) = line.split_once(':')?;
+            key.trim()
+                .eq_ignore_ascii_case(name)
+                .then(|| value.trim().to_string())
+        })
+    }
 }
 
 /// One HTTP/1.1 request with `Connection: close`.
@@ -150,30 +162,45 @@ pub fn http(
     body: Option<&str>,
     token: Option<&str>,
 ) -> Reply {
-    let mut stream = TcpStream::connect(addr).expect("connect");
-    stream
-        .set_read_timeout(Some(Duration::from_secs(30)))
-        .expect("timeout");
+    let auth = token.map(|t| format!("Bearer {t}"));
+    let headers: Vec<(&str, &str)> = auth.iter().map(|a| ("Authorization", a.as_str())).collect();
+    try_http(addr, method, path, body, &headers).expect("HTTP request")
+}
+
+/// One HTTP/1.1 request with extra headers; an error where the connection fails (a
+/// coordinator killed mid-request).
+pub fn try_http(
+    addr: &str,
+    method: &str,
+    path: &str,
+    body: Option<&str>,
+    headers: &[(&str, &str)],
+) -> std::io::Result<Reply> {
+    let mut stream = TcpStream::connect(addr)?;
+    stream.set_read_timeout(Some(Duration::from_secs(30)))?;
     let body = body.unwrap_or("");
-    let auth = token.map_or(String::new(), |t| format!("Authorization: Bearer {t}\r\n"));
+    let extra: String = headers
+        .iter()
+        .map(|(k, v)| format!("{k}: {v}\r\n"))
+        .collect();
     write!(
         stream,
-        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Type: application/json\r\n{auth}Content-Length: {}\r\n\r\n{body}",
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Type: application/json\r\n{extra}Content-Length: {}\r\n\r\n{body}",
         body.len()
-    )
-    .expect("write");
+    )?;
     let mut raw = Vec::new();
-    stream.read_to_end(&mut raw).expect("read");
+    stream.read_to_end(&mut raw)?;
+    let broken = || std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "no complete answer");
     let split = raw
         .windows(4)
         .position(|w| w == b"\r\n\r\n")
-        .expect("header end");
+        .ok_or_else(broken)?;
     let head = String::from_utf8_lossy(&raw[..split]).to_string();
     let status = head
         .split_whitespace()
         .nth(1)
         .and_then(|s| s.parse().ok())
-        .expect("status");
+        .ok_or_else(broken)?;
     let mut body = raw[split + 4..].to_vec();
     if head
         .to_ascii_lowercase()
@@ -181,7 +208,7 @@ pub fn http(
     {
         body = dechunk(&body);
     }
-    Reply { status, body }
+    Ok(Reply { status, head, body })
 }
 
 fn dechunk(mut data: &[u8]) -> Vec<u8> {

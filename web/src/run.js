@@ -25,6 +25,7 @@ export async function renderRun(main, idText) {
   const evaluations = el('div');
   const episodes = el('div');
   const recording = el('div', { id: 'recording' });
+  const deleteButton = el('button', { type: 'button', id: 'delete-run', class: 'danger', onclick: () => remove() }, 'Delete run');
   const episodesInput = el('input', { type: 'text', inputmode: 'numeric', value: '100', name: 'eval-episodes', size: 6 });
 
   const drawCharts = () => {
@@ -36,7 +37,7 @@ export async function renderRun(main, idText) {
   main.replaceChildren(
     header,
     el('div', { class: 'toolbar' }, chartControls(drawCharts), el('span', { class: 'spacer' }),
-      el('a', { href: `/compare?runs=${id}`, class: 'button' }, 'Compare with other runs')),
+      el('a', { href: `/compare?runs=${id}`, class: 'button' }, 'Compare with other runs'), ' ', deleteButton),
     el('div', { class: 'charts' }, figures),
     message,
     el('h2', {}, 'Checkpoints'),
@@ -46,6 +47,18 @@ export async function renderRun(main, idText) {
     el('h2', {}, 'Evaluations'), evaluations,
     el('h2', {}, 'Rerun recording'), recording,
     el('h2', {}, 'Episodes and their stage transitions'), episodes);
+
+  // Deleting removes the run's checkpoints, recording, metrics and evaluations for good.
+  async function remove() {
+    if (!window.confirm(`Delete run #${id} with its checkpoints, recording, metrics and evaluations?`)) return;
+    try {
+      const done = await send('DELETE', `/api/v1/runs/${id}`);
+      main.replaceChildren(el('div', { class: 'ok', id: 'deleted' },
+        `Run #${done.deleted} deleted; ${fmtBytes(done.freed_bytes)} freed. `, el('a', { href: '/' }, 'Back to the jobs')));
+    } catch (err) {
+      message.replaceChildren(errorBox(err));
+    }
+  }
 
   async function evaluate(checkpoint) {
     const text = episodesInput.value.trim();
@@ -62,6 +75,9 @@ export async function renderRun(main, idText) {
     const run = d.run;
     const spec = asObject(run.spec);
     const last = d.metrics.length ? asObject(d.metrics[d.metrics.length - 1].data) : null;
+    const finished = !['queued', 'running'].includes(run.state);
+    deleteButton.disabled = !finished;
+    deleteButton.title = finished ? 'Delete this run and everything it stored' : 'Cancel the run before deleting it';
     header.replaceChildren(
       el('h1', {}, `Run #${run.id} `, el('small', {}, run.algorithm), ' ', badge(run.state)),
       el('dl', { class: 'facts' },
@@ -70,6 +86,7 @@ export async function renderRun(main, idText) {
         ...fact('steps/s', run.steps_per_s ? Math.round(run.steps_per_s) : ''),
         ...fact('success (last 100)', last ? fmtNum(last.success_rate_last_100) : ''),
         ...fact('started', fmtTime(run.started_at)), ...fact('duration', duration(run)),
+        ...fact('disk', fmtBytes(d.disk_bytes || 0)),
         ...fact('attempts', run.attempts), ...(run.rerun_of ? fact('re-run of', el('a', { href: `/runs/${run.rerun_of}` }, `#${run.rerun_of}`)) : []),
         ...(run.error ? fact('error', el('span', { class: 'bad' }, run.error)) : [])),
       el('details', {}, el('summary', {}, 'configuration'), el('pre', {}, JSON.stringify(spec, null, 2))));
@@ -157,4 +174,16 @@ function episodeList(episodes) {
   return el('table', { id: 'episodes' },
     el('thead', {}, el('tr', {}, ['task', 'success', 'length', 'return', 'stage transitions (event, reward)'].map((h) => el('th', {}, h)))),
     el('tbody', {}, rows));
+}
+
+/** Bytes as KiB, MiB or GiB. */
+function fmtBytes(bytes) {
+  const units = ['bytes', 'KiB', 'MiB', 'GiB'];
+  let value = bytes;
+  let unit = 0;
+  while (value >= 1024 && unit < units.length - 1) {
+    value /= 1024;
+    unit += 1;
+  }
+  return unit === 0 ? `${value} bytes` : `${value.toFixed(1)} ${units[unit]}`;
 }

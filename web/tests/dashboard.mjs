@@ -219,6 +219,26 @@ check('the topology page shows picks per task and a heat map of forced topologie
   await shot('topology');
 });
 
+// Last: it removes run C (the other checks use it).
+check('a finished run shows its disk use and can be deleted from its page', async () => {
+  const before = await api(`/api/v1/runs/${runC}`);
+  assert.ok(before.disk_bytes > 0, 'the run stores checkpoints');
+  await page.goto(`${base}/runs/${runC}`);
+  await page.waitForSelector('h1:has-text("Run #")');
+  assert.match(await page.textContent('dl.facts'), /disk\s*[\d.]+ (KiB|MiB|GiB)/);
+  assert.equal(await page.isDisabled('#delete-run'), false);
+  page.once('dialog', (dialog) => dialog.accept());
+  await page.click('#delete-run');
+  await page.waitForSelector('#deleted');
+  assert.match(await page.textContent('#deleted'), new RegExp(`Run #${runC} deleted`));
+  const gone = await fetch(`${base}/api/v1/runs/${runC}`);
+  assert.equal(gone.status, 404);
+  for (const id of [runA, runB]) await api(`/api/v1/runs/${id}`);
+  const jobs = await api('/api/v1/jobs?limit=10000');
+  assert.ok(!jobs.jobs.some((j) => j.id === runC), 'the run left the jobs list');
+  await shot('deleted');
+});
+
 let failed = 0;
 for (const [name, body] of checks) {
   try {

@@ -482,3 +482,37 @@ fn a_short_seeded_run_on_a_hold_task_beats_the_untrained_policy() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Evaluation samples the policy by default (the paper's way), seeded so that it repeats, and
+/// `--deterministic` takes the mean action; the report says which.
+#[test]
+fn evaluation_samples_by_default_and_repeats_with_its_seed() {
+    let eval = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec![
+            "eval",
+            "--checkpoint",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../models/crm-ppo.safetensors"),
+            "--task",
+            "mouse-press",
+            "--task",
+            "box-lift",
+            "--episodes",
+            "4",
+            "--seed",
+            "5",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let (code, stdout, stderr) = crm(&args);
+        assert_eq!(code, 0, "{stderr}");
+        let mut report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+        report.as_object_mut().expect("object").remove("checkpoint");
+        report
+    };
+    let sampled = eval(&[]);
+    assert_eq!(sampled["deterministic"], false);
+    assert_eq!(sampled, eval(&[]), "the same seed, the same evaluation");
+    let mean = eval(&["--deterministic"]);
+    assert_eq!(mean["deterministic"], true);
+    assert_eq!(mean["episodes"], 4);
+}

@@ -119,6 +119,11 @@ pub struct TrainSpec {
     /// `scripted` (default, the paper's protocol) or `learned`.
     #[serde(default)]
     pub objective: ObjectiveMode,
+    /// Draw the episodes' tasks more often where the policy fails (weight `0.2 + 1 -
+    /// success` over each task's last 50 training episodes; after Prioritized Level Replay).
+    /// Off by default: the paper draws tasks uniformly.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub curriculum: bool,
 }
 
 fn is_default_sac(config: &SacConfig) -> bool {
@@ -151,6 +156,12 @@ pub struct EvalSpec {
     /// `scripted` (default, the paper's protocol) or `learned`.
     #[serde(default)]
     pub objective: ObjectiveMode,
+    /// Act with the policy's mean action. Default: sample the policy's actions, seeded by
+    /// `seed`, as the paper's evaluation does (the authors' `crm_ppo/evaluate.py` calls
+    /// Stable-Baselines3's `model.predict(obs)`, whose default is `deterministic=False`;
+    /// CleanRL's evaluations sample too).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub deterministic: bool,
 }
 
 fn default_episodes() -> u64 {
@@ -167,6 +178,7 @@ impl Default for EvalSpec {
             topology: None,
             record: None,
             objective: ObjectiveMode::default(),
+            deterministic: false,
         }
     }
 }
@@ -225,6 +237,9 @@ pub struct EvalReport {
     /// Who executed the objective (`scripted` or `learned`).
     #[serde(default)]
     pub objective: ObjectiveMode,
+    /// Whether the policy acted with its mean action (`false`: sampled, the paper's way).
+    #[serde(default)]
+    pub deterministic: bool,
     pub per_objective: BTreeMap<String, Row>,
     /// How the episodes ended: the terminal stage reached, or `truncated` at the time limit.
     #[serde(default)]
@@ -235,10 +250,15 @@ impl EvalReport {
     /// The report as a Markdown table.
     pub fn markdown(&self) -> String {
         let mut text = format!(
-            "{} ({} steps, {} objective): success {:.3}, mean length {:.1} control steps ({:.1} s simulated) over {} episodes (seed {})\n\n| objective | success | episode length | simulated s |\n| --- | --- | --- | --- |\n",
+            "{} ({} steps, {} objective, {} actions): success {:.3}, mean length {:.1} control steps ({:.1} s simulated) over {} episodes (seed {})\n\n| objective | success | episode length | simulated s |\n| --- | --- | --- | --- |\n",
             self.algorithm,
             self.trained_steps,
             self.objective.name(),
+            if self.deterministic {
+                "mean"
+            } else {
+                "sampled"
+            },
             self.success_rate,
             self.mean_episode_length,
             self.mean_sim_seconds,
@@ -283,5 +303,19 @@ mod tests {
         );
         let eval: EvalSpec = serde_json::from_str("{}").expect("eval");
         assert_eq!(eval.episodes, 1000);
+        // The paper's evaluation samples the policy; the mean action is asked for.
+        assert!(!eval.deterministic);
+        let mean: EvalSpec = serde_json::from_str(r#"{"deterministic": true}"#).expect("eval");
+        assert!(mean.deterministic);
+        assert!(serde_json::from_str::<EvalSpec>(r#"{"deterministic": "yes"}"#).is_err());
+        // Curriculum: off unless asked, and not written out when off.
+        let spec: TrainSpec =
+            serde_json::from_str(r#"{"algorithm":"crm-ppo","steps":1}"#).expect("train");
+        assert!(!spec.curriculum);
+        assert!(
+            !serde_json::to_string(&spec)
+                .expect("json")
+                .contains("curriculum")
+        );
     }
 }

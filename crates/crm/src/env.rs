@@ -27,6 +27,11 @@ pub trait Environment {
     fn set_stage(&mut self, stage: &str);
     /// Applies one union-space action (already scaled and masked) for one control step.
     fn step(&mut self, action: &[f32]) -> std::result::Result<EnvStep, String>;
+    /// A label for the current episode that learners may count outcomes by (the grasping
+    /// environment's task index); `None` by default.
+    fn episode_tag(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// One step of an environment inside a machine, as a learner sees it.

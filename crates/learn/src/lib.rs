@@ -5,6 +5,7 @@
 //! (safetensors with a JSON header). Synchronous; no I/O but checkpoint files.
 
 pub mod checkpoint;
+pub mod curriculum;
 pub mod early_stop;
 pub mod error;
 pub mod gae;
@@ -21,6 +22,7 @@ pub mod topology;
 
 pub use checkpoint::{Checkpoint, CheckpointHeader};
 pub use crm_api::PpoConfig;
+pub use curriculum::TaskCurriculum;
 pub use early_stop::EarlyStop;
 pub use error::{Error, Result};
 pub use imitation::Demos;
@@ -28,6 +30,6 @@ pub use network::{ActorCritic, Layout};
 pub use noise::Noise;
 pub use normalize::{ObsNorm, RewardScaler};
 pub use ppo::{Ppo, UpdateStats, UpdateTiming};
-pub use rollout::{Actor, Rollout, VecEnv};
+pub use rollout::{Actor, Episode, Rollout, VecEnv};
 pub use sac::{Sac, SacNets, SacStats};
 pub use topology::{Example, TopologyNet};

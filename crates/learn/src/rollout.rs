@@ -1,11 +1,14 @@
-//! Vectorized rollouts: several `crm::CrmEnv`s stepped in parallel, the policy evaluated on
-//! all of them in one batch. Deterministic per seed whatever the thread count: each
-//! environment's episode seeds depend only on the base seed, its index and its episode count,
-//! and the policy's noise is drawn in environment order on the calling thread.
+//! Vectorized rollouts: several `crm::CrmEnv`s stepped in parallel, either each on its own
+//! (learners that act one environment at a time: no barrier between steps) or in lock-step
+//! with the policy evaluated on all of them in one batch. Deterministic per seed whatever the
+//! thread count: each environment's episode seeds depend only on the base seed, its index and
+//! its episode count, and the policy's noise comes from the environment's own generator (or,
+//! in lock-step, is drawn in environment order on the calling thread).
 
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::noise::Noise;
 
 /// Collected experience: each environment's steps contiguous, environments in order.
 #[derive(Clone, Debug, Default)]
@@ -27,8 +30,21 @@ pub struct Rollout {
     pub ended: Vec<bool>,
     /// The environment (index) each step came from.
     pub env: Vec<usize>,
-    /// Episodes that ended in this rollout: (success, length, return).
-    pub episodes: Vec<(bool, usize, f32)>,
+    /// Episodes that ended in this rollout.
+    pub episodes: Vec<Episode>,
+}
+
+/// An episode that ended in a rollout.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Episode {
+    pub success: bool,
+    /// Control steps.
+    pub length: usize,
+    /// Intra-stage plus transition rewards, unscaled.
+    pub total_return: f32,
+    /// The environment's label for the episode ([`crm::Environment::episode_tag`]: the
+    /// grasping environment's task index).
+    pub tag: Option<usize>,
 }
 
 impl Rollout {
@@ -70,10 +86,80 @@ struct Slot<E> {
     episode_return: f32,
     episode_length: usize,
     buffer: Rollout,
+    /// This environment's policy noise, for learners that act one environment at a time.
+    noise: Noise,
+}
+
+impl<E: crm::Environment> Slot<E> {
+    /// Steps the environment with `action`, records the step, and starts the next episode
+    /// (seeded by the base seed, the environment's index `k` and its episode count) when
+    /// this one ends.
+    fn advance(
+        &mut self,
+        k: usize,
+        base_seed: u64,
+        action: Vec<f32>,
+        log_prob: f32,
+        mask: Vec<f32>,
+    ) -> Result<()> {
+        let step = self.env.step(&action).map_err(env_error)?;
+        self.episode_return += step.intra_reward + step.transition_reward;
+        self.episode_length += 1;
+        let last = step.done || step.truncated;
+        let b = &mut self.buffer;
+        b.states.push(std::mem::take(&mut self.state));
+        b.stages.push(self.stage);
+        b.next_states.push(step.abstract_state.clone());
+        b.next_stages.push(step.stage);
+        b.actions.push(action);
+        b.masks.push(mask);
+        b.log_probs.push(log_prob);
+        b.intra.push(step.intra_reward);
+        b.transition.push(step.transition_reward);
+        b.terminal.push(step.done);
+        b.last.push(last);
+        b.ended.push(last);
+        b.env.push(k);
+        if last {
+            let success = step.done && self.env.machine().stage_name(step.stage) == "success";
+            b.episodes.push(Episode {
+                success,
+                length: self.episode_length,
+                total_return: self.episode_return,
+                tag: self.env.env().episode_tag(),
+            });
+            self.episode += 1;
+            self.episode_return = 0.0;
+            self.episode_length = 0;
+            let seed = episode_seed(base_seed, k, self.episode);
+            (self.stage, self.state) = self.env.reset(seed).map_err(env_error)?;
+        } else {
+            (self.stage, self.state) = (step.stage, step.abstract_state);
+        }
+        Ok(())
+    }
 }
 
 /// A policy the rollouts can ask for actions (PPO's and SAC's).
 pub trait Actor {
+    /// Whether [`Actor::act_one`] is implemented: the rollout then steps each environment
+    /// on its own, without a barrier between steps.
+    fn acts_alone(&self) -> bool {
+        false
+    }
+
+    /// The action and its log-probability for one environment's abstract state, with that
+    /// environment's `noise` (callable from several threads at once).
+    fn act_one(
+        &self,
+        _state: &[f32],
+        _stage: usize,
+        _mask: &[f32],
+        _noise: &mut Noise,
+    ) -> Result<(Vec<f32>, f32)> {
+        Err(Error::Env("this learner acts in batches only".into()))
+    }
+
     /// Union-space actions (and their log-probabilities, where the learner needs them) for a
     /// batch of abstract states; noise drawn row by row in order.
     fn act_batch(
@@ -126,6 +212,7 @@ impl<E: crm::Environment + Send> VecEnv<E> {
                     episode_return: 0.0,
                     episode_length: 0,
                     buffer: Rollout::default(),
+                    noise: Noise::new(episode_seed(base_seed, k, u64::MAX)),
                 })
             })
             .collect::<Result<Vec<_>>>()?;
@@ -140,61 +227,61 @@ impl<E: crm::Environment + Send> VecEnv<E> {
         self.slots.is_empty()
     }
 
+    /// The environments, in order (to change settings that apply from their next reset).
+    pub fn envs_mut(&mut self) -> impl Iterator<Item = &mut crm::CrmEnv<E>> {
+        self.slots.iter_mut().map(|s| &mut s.env)
+    }
+
     /// Steps every environment `steps_per_env` times with the policy of `actor`.
-    pub fn collect<A: Actor>(&mut self, actor: &mut A, steps_per_env: usize) -> Result<Rollout> {
+    ///
+    /// A learner that can act for one environment at a time ([`Actor::act_one`]) is run
+    /// without a barrier between steps: each environment takes its steps on its own (the
+    /// pool steals whole environments), with its own noise generator, so an environment whose
+    /// step runs the arm's scripted execution (hundreds of physics steps) does not hold the
+    /// others up. Others are stepped in lock-step batches.
+    pub fn collect<A: Actor + Sync>(
+        &mut self,
+        actor: &mut A,
+        steps_per_env: usize,
+    ) -> Result<Rollout> {
         let base_seed = self.base_seed;
-        for _ in 0..steps_per_env {
-            let states: Vec<Vec<f32>> = self.slots.iter().map(|s| s.state.clone()).collect();
-            let stages: Vec<usize> = self.slots.iter().map(|s| s.stage).collect();
-            let masks: Vec<Vec<f32>> = self
-                .slots
-                .iter()
-                .map(|s| s.env.machine().action_mask(s.stage))
-                .collect();
-            let (actions, log_probs) = actor.act_batch(&states, &stages, &masks, false)?;
+        if actor.acts_alone() {
+            let actor: &A = actor;
             self.slots
                 .par_iter_mut()
                 .enumerate()
-                .zip(
-                    actions
-                        .into_par_iter()
-                        .zip(log_probs.into_par_iter())
-                        .zip(masks.into_par_iter()),
-                )
-                .try_for_each(|((k, slot), ((action, log_prob), mask))| -> Result<()> {
-                    let step = slot.env.step(&action).map_err(env_error)?;
-                    slot.episode_return += step.intra_reward + step.transition_reward;
-                    slot.episode_length += 1;
-                    let last = step.done || step.truncated;
-                    let b = &mut slot.buffer;
-                    b.states.push(std::mem::take(&mut slot.state));
-                    b.stages.push(slot.stage);
-                    b.next_states.push(step.abstract_state.clone());
-                    b.next_stages.push(step.stage);
-                    b.actions.push(action);
-                    b.masks.push(mask);
-                    b.log_probs.push(log_prob);
-                    b.intra.push(step.intra_reward);
-                    b.transition.push(step.transition_reward);
-                    b.terminal.push(step.done);
-                    b.last.push(last);
-                    b.ended.push(last);
-                    b.env.push(k);
-                    if last {
-                        let success =
-                            step.done && slot.env.machine().stage_name(step.stage) == "success";
-                        b.episodes
-                            .push((success, slot.episode_length, slot.episode_return));
-                        slot.episode += 1;
-                        slot.episode_return = 0.0;
-                        slot.episode_length = 0;
-                        let seed = episode_seed(base_seed, k, slot.episode);
-                        (slot.stage, slot.state) = slot.env.reset(seed).map_err(env_error)?;
-                    } else {
-                        (slot.stage, slot.state) = (step.stage, step.abstract_state);
+                .try_for_each(|(k, slot)| -> Result<()> {
+                    for _ in 0..steps_per_env {
+                        let mask = slot.env.machine().action_mask(slot.stage);
+                        let (action, log_prob) =
+                            actor.act_one(&slot.state, slot.stage, &mask, &mut slot.noise)?;
+                        slot.advance(k, base_seed, action, log_prob, mask)?;
                     }
                     Ok(())
                 })?;
+        } else {
+            for _ in 0..steps_per_env {
+                let states: Vec<Vec<f32>> = self.slots.iter().map(|s| s.state.clone()).collect();
+                let stages: Vec<usize> = self.slots.iter().map(|s| s.stage).collect();
+                let masks: Vec<Vec<f32>> = self
+                    .slots
+                    .iter()
+                    .map(|s| s.env.machine().action_mask(s.stage))
+                    .collect();
+                let (actions, log_probs) = actor.act_batch(&states, &stages, &masks, false)?;
+                self.slots
+                    .par_iter_mut()
+                    .enumerate()
+                    .zip(
+                        actions
+                            .into_par_iter()
+                            .zip(log_probs.into_par_iter())
+                            .zip(masks.into_par_iter()),
+                    )
+                    .try_for_each(|((k, slot), ((action, log_prob), mask))| {
+                        slot.advance(k, base_seed, action, log_prob, mask)
+                    })?;
+            }
         }
         let mut rollout = Rollout::default();
         for slot in &mut self.slots {

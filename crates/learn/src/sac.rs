@@ -103,6 +103,12 @@ impl SacNets {
         Ok((self.head(input)?.0.tanh()? * mask)?)
     }
 
+    /// A sampled action `tanh(mean + std * eps) * mask` for standard normal `eps` `[batch,
+    /// actions]` (evaluations that sample the policy).
+    pub fn sample_action(&self, input: &Tensor, mask: &Tensor, eps: &Tensor) -> Result<Tensor> {
+        Ok(self.sample(input, mask, eps)?.0)
+    }
+
     /// A reparameterized sample `tanh(mean + std * eps) * mask` and its log-probability over
     /// the live dimensions (with the tanh correction).
     fn sample(&self, input: &Tensor, mask: &Tensor, eps: &Tensor) -> Result<(Tensor, Tensor)> {

@@ -38,6 +38,9 @@ pub enum Error {
     /// A task id that is not in the benchmark.
     #[error("unknown task {0:?}")]
     UnknownTask(String),
+
+    #[error("task weights: {0}")]
+    TaskWeights(String),
     /// The machine spec does not fit this environment.
     #[error("crm spec: {0}")]
     Crm(#[from] crm::Error),

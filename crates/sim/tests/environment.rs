@@ -167,6 +167,56 @@ fn commanded_fingers_reach_their_coupled_angles_in_free_space() {
 }
 
 #[test]
+fn task_weights_draw_within_the_task_choice_and_bad_weights_are_refused() {
+    use grasp_sim::TaskChoice;
+    let mut env = env(SimConfig::default());
+    let tasks = env.benchmark().tasks.len();
+    let draws = |env: &mut GraspEnv| -> Vec<usize> {
+        (0..200)
+            .map(|seed| {
+                env.reset_seeded(seed).expect("reset");
+                env.task_index()
+            })
+            .collect()
+    };
+    // Weight on tasks 3 and 7 only, 3 four times 7's.
+    let mut weights = vec![0.0; tasks];
+    weights[3] = 4.0;
+    weights[7] = 1.0;
+    env.set_task_weights(Some(weights.clone()))
+        .expect("weights");
+    let seen = draws(&mut env);
+    let threes = seen.iter().filter(|&&t| t == 3).count();
+    assert!(seen.iter().all(|&t| t == 3 || t == 7), "{seen:?}");
+    assert!(
+        (140..=180).contains(&threes),
+        "task 3 drawn {threes} of 200"
+    );
+    // The same seeds give the same draws.
+    assert_eq!(draws(&mut env), seen);
+    // Within a subset, weights outside it do not count.
+    env.set_task_choice(TaskChoice::Subset(vec![7, 9]))
+        .expect("subset");
+    assert!(draws(&mut env).iter().all(|&t| t == 7));
+    // Back to uniform.
+    env.set_task_weights(None).expect("uniform");
+    let uniform: std::collections::BTreeSet<usize> = draws(&mut env).into_iter().collect();
+    assert_eq!(uniform, [7, 9].into());
+    // Wrong length, negative or not finite: refused, the old weights stay.
+    for bad in [
+        vec![1.0; tasks - 1],
+        {
+            let mut w = vec![1.0; tasks];
+            w[0] = -1.0;
+            w
+        },
+        vec![f32::NAN; tasks],
+    ] {
+        assert!(env.set_task_weights(Some(bad)).is_err());
+    }
+}
+
+#[test]
 fn task_subsets_and_forced_topologies_apply_from_the_next_reset() {
     use grasp_sim::TaskChoice;
     use grasp_sim::benchmark::Topology;

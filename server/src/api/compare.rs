@@ -370,6 +370,7 @@ mod tests {
             mean_episode_length: l,
             mean_sim_seconds: 0.0,
             objective: Default::default(),
+            deterministic: false,
             per_objective: BTreeMap::new(),
             outcomes: BTreeMap::new(),
         };
@@ -410,6 +411,7 @@ mod tests {
             mean_episode_length: 0.0,
             mean_sim_seconds: 0.0,
             objective: Default::default(),
+            deterministic: false,
             per_objective: BTreeMap::new(),
             outcomes: BTreeMap::new(),
         };

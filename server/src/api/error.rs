@@ -67,6 +67,14 @@ impl ApiError {
         match err {
             StoreError::NotFound => Self::not_found("id", format!("no such {what}")),
             StoreError::Conflict(state) => Self::conflict(format!("the {what} is {state}")),
+            StoreError::KeyReused(job) => Self {
+                status: StatusCode::UNPROCESSABLE_ENTITY,
+                code: "idempotency_key_reused",
+                message: format!(
+                    "this Idempotency-Key was used for another request, which created job {job}; use a new key for a new job"
+                ),
+                field: Some("Idempotency-Key".into()),
+            },
             other => Self::internal(other),
         }
     }

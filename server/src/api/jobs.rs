@@ -9,7 +9,7 @@ use axum::Json;
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
 use axum::extract::{Path, Query, State};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use crm_api::{EvalSpec, TrainSpec};
 use serde::de::DeserializeOwned;
@@ -181,10 +181,43 @@ fn check_record(record: &Option<crm_api::RecordSpec>) -> Result<(), ApiError> {
     }
 }
 
+/// The header that makes a submit safe to retry.
+const IDEMPOTENCY_KEY: &str = "idempotency-key";
+/// Longest idempotency key accepted.
+const MAX_KEY_LEN: usize = 255;
+
+/// The request's idempotency key: 1 to 255 visible ASCII characters, or none.
+fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
+    let mut values = headers.get_all(IDEMPOTENCY_KEY).iter();
+    let Some(value) = values.next() else {
+        return Ok(None);
+    };
+    let bad = |why: &str| ApiError::invalid("Idempotency-Key", why.to_string());
+    if values.next().is_some() {
+        return Err(bad("give the header once"));
+    }
+    let key = value
+        .to_str()
+        .map_err(|_| bad("must be visible ASCII characters"))?;
+    if key.is_empty() || key.len() > MAX_KEY_LEN {
+        return Err(bad(&format!("must be 1 to {MAX_KEY_LEN} characters")));
+    }
+    if !key.bytes().all(|b| b.is_ascii_graphic()) {
+        return Err(bad("must be visible ASCII characters (no spaces)"));
+    }
+    Ok(Some(key.to_string()))
+}
+
+/// Submits a job. With an `Idempotency-Key` header, a retry with the same key and the same
+/// request (compared after validation, so defaults written out or left out are the same
+/// request) answers with the job the first submit created, in its current state, and the
+/// header `Idempotent-Replayed: true`; the same key with another request is 422.
 pub async fn create(
     State(state): State<Arc<AppState>>,
+    headers: HeaderMap,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ApiError> {
+    let key = idempotency_key(&headers)?;
     let body = body.map_err(|e| ApiError {
         status: e.status(),
         code: "bad_body",
@@ -194,18 +227,32 @@ pub async fn create(
     let value: Value = serde_json::from_slice(&body)
         .map_err(|e| ApiError::invalid("body", format!("not JSON: {e}")))?;
     let submission = validate(&state, value).await?;
-    let job = state
-        .store
-        .create_job(NewJob {
-            kind: submission.kind,
-            algorithm: &submission.algorithm,
-            task: submission.task.as_deref(),
-            spec: &submission.spec,
-            checkpoint_id: submission.checkpoint_id,
-            rerun_of: None,
-        })
-        .await
-        .map_err(|e| ApiError::store("job", e))?;
+    let new = NewJob {
+        kind: submission.kind,
+        algorithm: &submission.algorithm,
+        task: submission.task.as_deref(),
+        spec: &submission.spec,
+        checkpoint_id: submission.checkpoint_id,
+        rerun_of: None,
+    };
+    let (job, created) = match &key {
+        Some(key) => {
+            let request = serde_json::json!({
+                "kind": submission.kind,
+                "checkpoint_id": submission.checkpoint_id,
+                "spec": submission.spec,
+            })
+            .to_string();
+            state.store.create_job_once(new, key, &request).await
+        }
+        None => state.store.create_job(new).await.map(|job| (job, true)),
+    }
+    .map_err(|e| ApiError::store("job", e))?;
+    if !created {
+        tracing::info!(job = job.id, "idempotent submit replayed");
+        let replayed = [("idempotent-replayed", "true")];
+        return Ok((StatusCode::CREATED, replayed, Json(job)).into_response());
+    }
     tracing::info!(job = job.id, kind = job.kind, "job submitted");
     state.notify();
     Ok((StatusCode::CREATED, Json(job)).into_response())

@@ -36,7 +36,10 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/jobs/{id}/rerun", post(jobs::rerun))
         .route("/jobs/{id}/recording", get(resources::recording))
         .route("/runs", get(resources::runs))
-        .route("/runs/{id}", get(resources::run))
+        .route(
+            "/runs/{id}",
+            get(resources::run).delete(resources::delete_run),
+        )
         .route("/runs/{id}/metrics", get(resources::run_metrics))
         .route("/evaluations", get(resources::evaluations))
         .route("/evaluations/{id}", get(resources::evaluation))

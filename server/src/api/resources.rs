@@ -80,8 +80,12 @@ pub async fn run(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> 
         .collect();
     let episodes = store.episodes(job.id).await.map_err(err)?;
     let recording = recording_json(&state, job.id).await?;
+    // Disk the run uses: its checkpoints and its recording.
+    let disk_bytes =
+        checkpoints.iter().map(|c| c.size).sum::<i64>() + recording["size"].as_i64().unwrap_or(0);
     Ok(Json(json!({
         "run": job,
+        "disk_bytes": disk_bytes,
         "metrics": metrics,
         "checkpoints": checkpoints,
         "evaluations": evaluations,
@@ -89,6 +93,21 @@ pub async fn run(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> 
         "recording": recording,
     }))
     .into_response())
+}
+
+/// `DELETE /api/v1/runs/{id}`: removes a finished training run with its checkpoints,
+/// recording, metrics, episode summaries and the evaluations of its checkpoints; 409 while it
+/// (or one of those evaluations) is queued or running.
+pub async fn delete_run(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let job = job_of_kind(&state, &id, "train").await?;
+    let freed = state
+        .store
+        .delete_run(job.id)
+        .await
+        .map_err(|e| ApiError::store("run", e))?;
+    tracing::info!(run = job.id, freed, "run deleted");
+    state.notify();
+    Ok(Json(json!({"deleted": job.id, "freed_bytes": freed})).into_response())
 }
 
 /// A job's recording (size, episodes, download path), or null.

@@ -318,6 +318,12 @@ impl Coordinator for CoordinatorService {
             steps = meta.steps,
             "checkpoint stored"
         );
+        let keep = self.state.config.keep_checkpoints;
+        match self.state.store.prune_checkpoints(meta.job_id, keep).await {
+            Ok(0) => {}
+            Ok(removed) => tracing::info!(job = meta.job_id, removed, "old checkpoints removed"),
+            Err(err) => tracing::warn!(job = meta.job_id, %err, "checkpoint retention failed"),
+        }
         self.state.notify();
         Ok(Response::new(pb::CheckpointReply {
             checkpoint_id: row.id,

@@ -118,6 +118,9 @@ pub enum StoreError {
     NotFound,
     #[error("job is {0}")]
     Conflict(String),
+    /// An idempotency key already names another request.
+    #[error("the idempotency key was used for another request (job {0})")]
+    KeyReused(i64),
     #[error(transparent)]
     Sql(#[from] sqlx::Error),
     #[error(transparent)]
@@ -225,6 +228,64 @@ impl Store {
             .fetch_one(&self.pool)
             .await?;
         self.job(id).await
+    }
+
+    /// Creates a job once per idempotency `key`: the job and the key are stored in one
+    /// transaction, so a submit that raced another with the same key, or that is retried after
+    /// a crash, finds the first one's job. Returns the job and whether it was created now; the
+    /// key with another `request` (the canonical submission) is [`StoreError::KeyReused`].
+    pub async fn create_job_once(
+        &self,
+        job: NewJob<'_>,
+        key: &str,
+        request: &str,
+    ) -> Result<(Job, bool)> {
+        if let Some(found) = self.keyed_job(key, request).await? {
+            return Ok((found, false));
+        }
+        let mut tx = self.pool.begin().await?;
+        let id: i64 = sqlx::query_scalar("INSERT INTO jobs (kind, state, algorithm, task, spec, checkpoint_id, rerun_of, created_at) VALUES (?, 'queued', ?, ?, ?, ?, ?, ?) RETURNING id")
+            .bind(job.kind).bind(job.algorithm).bind(job.task).bind(job.spec)
+            .bind(job.checkpoint_id).bind(job.rerun_of).bind(now_ms())
+            .fetch_one(&mut *tx)
+            .await?;
+        let keyed = sqlx::query(
+            "INSERT INTO idempotency_keys (key, request, job_id, created_at) VALUES (?, ?, ?, ?)",
+        )
+        .bind(key)
+        .bind(request)
+        .bind(id)
+        .bind(now_ms())
+        .execute(&mut *tx)
+        .await;
+        match keyed {
+            Ok(_) => {
+                tx.commit().await?;
+                Ok((self.job(id).await?, true))
+            }
+            Err(sqlx::Error::Database(db)) if db.is_unique_violation() => {
+                // Another submit with this key won the race: drop this job, answer with its.
+                tx.rollback().await?;
+                let found = self.keyed_job(key, request).await?;
+                Ok((found.ok_or(StoreError::NotFound)?, false))
+            }
+            Err(other) => Err(other.into()),
+        }
+    }
+
+    /// The job stored under idempotency `key`, if any; the key with another request is an
+    /// error.
+    async fn keyed_job(&self, key: &str, request: &str) -> Result<Option<Job>> {
+        let row: Option<(String, i64)> =
+            sqlx::query_as("SELECT request, job_id FROM idempotency_keys WHERE key = ?")
+                .bind(key)
+                .fetch_optional(&self.pool)
+                .await?;
+        match row {
+            None => Ok(None),
+            Some((stored, job)) if stored == request => Ok(Some(self.job(job).await?)),
+            Some((_, job)) => Err(StoreError::KeyReused(job)),
+        }
     }
 
     pub async fn job(&self, id: i64) -> Result<Job> {
@@ -447,7 +508,124 @@ impl Store {
         )
     }
 
+    /// Retention: removes the checkpoints of `job` older than its newest `keep`, except one
+    /// that is the job's final checkpoint or that an evaluation job names. Rows go first, in
+    /// one transaction, then their files; returns how many were removed.
+    pub async fn prune_checkpoints(&self, job: i64, keep: u32) -> Result<usize> {
+        let mut tx = self.pool.begin().await?;
+        let old: Vec<(i64, String)> = sqlx::query_as(
+            "SELECT id, file FROM checkpoints WHERE job_id = ?1 \
+             AND id NOT IN (SELECT id FROM checkpoints WHERE job_id = ?1 ORDER BY id DESC LIMIT ?2) \
+             AND id NOT IN (SELECT checkpoint_id FROM jobs WHERE checkpoint_id IS NOT NULL) \
+             AND id IS NOT (SELECT json_extract(result, '$.checkpoint_id') FROM jobs WHERE id = ?1)",
+        )
+        .bind(job)
+        .bind(i64::from(keep.max(1)))
+        .fetch_all(&mut *tx)
+        .await?;
+        for (id, _) in &old {
+            sqlx::query("DELETE FROM checkpoints WHERE id = ?")
+                .bind(id)
+                .execute(&mut *tx)
+                .await?;
+        }
+        tx.commit().await?;
+        for (_, file) in &old {
+            remove_file(&self.checkpoints.join(file)).await;
+        }
+        Ok(old.len())
+    }
+
+    /// Deletes a finished training run: its job, metrics, episode summaries, checkpoints,
+    /// recording, idempotency keys, and the evaluation jobs of its checkpoints (with theirs).
+    /// A queued or running run, or one whose checkpoint an unfinished evaluation uses, is a
+    /// conflict and nothing changes. Rows go in one transaction, then the files; returns the
+    /// bytes freed.
+    pub async fn delete_run(&self, id: i64) -> Result<u64> {
+        let mut tx = self.pool.begin().await?;
+        let state: Option<String> = sqlx::query_scalar("SELECT state FROM jobs WHERE id = ?")
+            .bind(id)
+            .fetch_optional(&mut *tx)
+            .await?;
+        let state = state.ok_or(StoreError::NotFound)?;
+        if state == "queued" || state == "running" {
+            return Err(StoreError::Conflict(state));
+        }
+        let evals: Vec<(i64, String)> = sqlx::query_as(
+            "SELECT id, state FROM jobs WHERE checkpoint_id IN (SELECT id FROM checkpoints WHERE job_id = ?)",
+        )
+        .bind(id)
+        .fetch_all(&mut *tx)
+        .await?;
+        if let Some((eval, state)) = evals.iter().find(|(_, s)| s == "queued" || s == "running") {
+            return Err(StoreError::Conflict(format!(
+                "in use: evaluation job {eval} is {state}"
+            )));
+        }
+        let mut files: Vec<(PathBuf, i64)> = sqlx::query_as::<_, (String, i64)>(
+            "SELECT file, size FROM checkpoints WHERE job_id = ?",
+        )
+        .bind(id)
+        .fetch_all(&mut *tx)
+        .await?
+        .into_iter()
+        .map(|(file, size)| (self.checkpoints.join(file), size))
+        .collect();
+        let jobs: Vec<i64> = evals.iter().map(|(e, _)| *e).chain([id]).collect();
+        for job in &jobs {
+            let recording: Option<(String, i64)> =
+                sqlx::query_as("SELECT file, size FROM recordings WHERE job_id = ?")
+                    .bind(job)
+                    .fetch_optional(&mut *tx)
+                    .await?;
+            files.extend(recording.map(|(file, size)| (self.recordings.join(file), size)));
+            for table in ["metrics", "episodes", "recordings", "idempotency_keys"] {
+                sqlx::query(&format!("DELETE FROM {table} WHERE job_id = ?"))
+                    .bind(job)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            // A re-run keeps its own copy of the parameters; only the back-reference goes.
+            sqlx::query("UPDATE jobs SET rerun_of = NULL WHERE rerun_of = ?")
+                .bind(job)
+                .execute(&mut *tx)
+                .await?;
+        }
+        for eval in evals.iter().map(|(e, _)| e) {
+            sqlx::query("DELETE FROM jobs WHERE id = ?")
+                .bind(eval)
+                .execute(&mut *tx)
+                .await?;
+        }
+        sqlx::query("DELETE FROM checkpoints WHERE job_id = ?")
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+        sqlx::query("DELETE FROM jobs WHERE id = ?")
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+        tx.commit().await?;
+        let mut freed = 0u64;
+        for (path, size) in files {
+            remove_file(&path).await;
+            freed += size.max(0) as u64;
+        }
+        Ok(freed)
+    }
+
     pub fn checkpoint_path(&self, row: &CheckpointRow) -> PathBuf {
         self.checkpoints.join(&row.file)
+    }
+}
+
+/// Removes a file whose row is gone; a file already missing is fine, another failure is
+/// logged (the row is the truth: an orphan file wastes disk, a row without its file would
+/// break downloads).
+async fn remove_file(path: &Path) {
+    match tokio::fs::remove_file(path).await {
+        Ok(()) => {}
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => {}
+        Err(err) => tracing::warn!(path = %path.display(), %err, "could not remove file"),
     }
 }

@@ -25,6 +25,10 @@ pub struct EvalArgs {
     /// pick) or a topology name forced on every task.
     #[arg(long)]
     pub topology: Option<String>,
+    /// Act with the policy's mean action instead of sampling it (the default samples, seeded
+    /// by `--seed`, as the paper's evaluation does).
+    #[arg(long)]
+    pub deterministic: bool,
     #[arg(long)]
     pub json: bool,
 }
@@ -38,6 +42,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         topology: args.topology.clone(),
         record: None,
         objective: args.env.protocol,
+        deterministic: args.deterministic,
     };
     let report = evaluate(&args.checkpoint, &spec, &args.env, None, |_, _, _| true)?;
     if args.json {

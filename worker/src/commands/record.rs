@@ -74,6 +74,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         topology: args.topology.clone(),
         record: Some(record),
         objective: args.env.protocol,
+        deterministic: false,
     };
     let mut episode = None;
     evaluate(

@@ -91,6 +91,7 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
             record: None,
             imitation: None,
             objective: args.env.protocol,
+            curriculum: false,
         };
         let started = Instant::now();
         let mut trainer = Trainer::new(spec, &args.env, None, None)?;
@@ -120,6 +121,7 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
             topology: None,
             record: None,
             objective: args.env.protocol,
+            deterministic: false,
         };
         let report = evaluate(&checkpoint, &eval, &args.env, None, |_, _, _| true)?;
         outcomes.push(Outcome {

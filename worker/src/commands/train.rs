@@ -61,6 +61,10 @@ pub struct TrainArgs {
     /// Learning rate of behaviour cloning.
     #[arg(long, default_value_t = 1e-3)]
     pub bc_learning_rate: f64,
+    /// Draw tasks more often where the policy fails (a job's `curriculum`); off: uniform, as
+    /// in the paper.
+    #[arg(long)]
+    pub curriculum: bool,
 }
 
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
@@ -101,6 +105,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         record: None,
         imitation,
         objective: args.env.protocol,
+        curriculum: args.curriculum,
     };
     let mut trainer = Trainer::new(spec.clone(), &args.env, args.resume.as_deref(), None)?;
     demos::imitate(&spec, &args.env, &mut trainer, |line| {

@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{Context, bail};
 use candle_core::{Device, Tensor};
 use crm_api::{EvalReport, EvalSpec, Row};
-use crm_learn::{Checkpoint, Layout, Ppo, PpoConfig, SacNets};
+use crm_learn::{Actor, Checkpoint, Layout, Noise, Ppo, PpoConfig, SacNets};
 use grasp_sim::GraspEnv;
 use grasp_sim::benchmark::Objective;
 
@@ -65,15 +65,30 @@ impl LoadedPolicy {
         })
     }
 
-    /// The deterministic action (the Gaussian's mean; SAC: `tanh` of it), zero outside the
-    /// stage's action set.
-    pub fn act(&mut self, state: &[f32], stage: usize, mask: &[f32]) -> anyhow::Result<Vec<f32>> {
-        let action = match &mut self.net {
-            PolicyNet::Ppo(ppo) => ppo.act(state, stage, mask, true)?.0,
-            PolicyNet::Sac(nets) => {
+    /// The policy's action, zero outside the stage's action set: sampled with `noise`, or
+    /// without it the deterministic one (the Gaussian's mean; SAC: `tanh` of it).
+    pub fn act(
+        &mut self,
+        state: &[f32],
+        stage: usize,
+        mask: &[f32],
+        noise: Option<&mut Noise>,
+    ) -> anyhow::Result<Vec<f32>> {
+        let action = match (&mut self.net, noise) {
+            (PolicyNet::Ppo(ppo), None) => ppo.act(state, stage, mask, true)?.0,
+            (PolicyNet::Ppo(ppo), Some(noise)) => ppo.act_one(state, stage, mask, noise)?.0,
+            (PolicyNet::Sac(nets), noise) => {
                 let input = nets.input(&[state.to_vec()], &[stage])?;
                 let mask = Tensor::from_vec(mask.to_vec(), (1, mask.len()), &Device::Cpu)?;
-                nets.mean_action(&input, &mask)?.squeeze(0)?.to_vec1()?
+                let action = match noise {
+                    None => nets.mean_action(&input, &mask)?,
+                    Some(noise) => {
+                        let eps: Vec<f32> = (0..mask.dim(1)?).map(|_| noise.normal()).collect();
+                        let eps = Tensor::from_vec(eps, (1, mask.dim(1)?), &Device::Cpu)?;
+                        nets.sample_action(&input, &mask, &eps)?
+                    }
+                };
+                action.squeeze(0)?.to_vec1()?
             }
         };
         Ok(action.iter().zip(mask).map(|(a, m)| a * m).collect())
@@ -128,6 +143,8 @@ pub fn evaluate(
     super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?.apply(&mut grasp)?;
     let recorded = crate::record::Recorded::new(grasp, machine.clone(), recorder);
     let mut crm_env = crm::CrmEnv::new(machine, recorded, crm::RewardMode::Crm);
+    // The policy's noise when it samples (the default, as the paper's evaluation): seeded.
+    let mut noise = (!spec.deterministic).then(|| Noise::new(spec.seed ^ 0x00E7_A1ED_5EED));
     // Per objective: episodes, successes, control steps, simulated seconds.
     let mut sums: BTreeMap<Objective, (u64, u64, u64, f64)> = BTreeMap::new();
     let mut outcomes: BTreeMap<String, u64> = BTreeMap::new();
@@ -137,7 +154,7 @@ pub fn evaluate(
         let objective = crm_env.env().inner().objective();
         let (success, length) = loop {
             let mask = crm_env.machine().action_mask(stage);
-            let action = policy.act(&state, stage, &mask)?;
+            let action = policy.act(&state, stage, &mask, noise.as_mut())?;
             let step = crm_env.step(&action)?;
             if step.done || step.truncated {
                 let end = if step.done {
@@ -200,6 +217,7 @@ pub fn evaluate(
         mean_episode_length: overall.mean_episode_length,
         mean_sim_seconds: overall.mean_sim_seconds,
         objective: spec.objective,
+        deterministic: spec.deterministic,
         per_objective: sums
             .into_iter()
             .map(|(o, s)| (o.name().to_string(), row(s)))

@@ -12,7 +12,9 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use crm_api::{Algorithm, Iteration, TrainSpec};
 use crm_learn::checkpoint::FORMAT;
-use crm_learn::{Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, Sac, VecEnv};
+use crm_learn::{
+    Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, Sac, TaskCurriculum, VecEnv,
+};
 use grasp_sim::GraspEnv;
 
 use crate::commands::EnvArgs;
@@ -41,6 +43,8 @@ pub struct Trainer {
     done: u64,
     iteration: u64,
     stopped_early: bool,
+    /// Per-task success driving the task weights, when the job asks for a curriculum.
+    curriculum: Option<TaskCurriculum>,
 }
 
 impl Trainer {
@@ -138,7 +142,11 @@ impl Trainer {
         let stage_names = (0..layout.stages)
             .map(|s| machine.stage_name(s).to_string())
             .collect();
+        let curriculum = spec
+            .curriculum
+            .then(|| TaskCurriculum::new(benchmark.tasks.len()));
         Ok(Self {
+            curriculum,
             early_stop: EarlyStop::new(window, threshold),
             spec,
             envs,
@@ -226,8 +234,21 @@ impl Trainer {
         };
         self.done += rollout.len() as u64;
         self.iteration += 1;
-        for &(success, _, _) in &rollout.episodes {
-            self.stopped_early |= self.early_stop.record(success);
+        for episode in &rollout.episodes {
+            self.stopped_early |= self.early_stop.record(episode.success);
+        }
+        if let Some(curriculum) = &mut self.curriculum {
+            for episode in &rollout.episodes {
+                if let Some(task) = episode.tag {
+                    curriculum.record(task, episode.success);
+                }
+            }
+            let weights = curriculum.weights();
+            for env in self.envs.envs_mut() {
+                env.env_mut()
+                    .inner_mut()
+                    .set_task_weights(Some(weights.clone()))?;
+            }
         }
         let episodes = rollout.episodes.len() as u64;
         let per_episode = |total: f64| total / episodes.max(1) as f64;
@@ -242,14 +263,22 @@ impl Trainer {
             wall_s: elapsed,
             steps_per_s: (self.done - self.start_steps) as f64 / elapsed.max(1e-9),
             episodes,
-            successes: rollout.episodes.iter().filter(|e| e.0).count() as u64,
+            successes: rollout.episodes.iter().filter(|e| e.success).count() as u64,
             success_rate_last_100: f64::from(self.early_stop.success_rate()),
-            mean_return: per_episode(rollout.episodes.iter().map(|e| f64::from(e.2)).sum()),
+            mean_return: per_episode(
+                rollout
+                    .episodes
+                    .iter()
+                    .map(|e| f64::from(e.total_return))
+                    .sum(),
+            ),
             mean_intra_return: per_episode(rollout.intra.iter().map(|&r| f64::from(r)).sum()),
             mean_transition_return: per_episode(
                 rollout.transition.iter().map(|&r| f64::from(r)).sum(),
             ),
-            mean_episode_length: per_episode(rollout.episodes.iter().map(|e| e.1 as f64).sum()),
+            mean_episode_length: per_episode(
+                rollout.episodes.iter().map(|e| e.length as f64).sum(),
+            ),
             stage_mix: mix
                 .iter()
                 .zip(&self.stage_names)

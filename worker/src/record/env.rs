@@ -38,6 +38,11 @@ impl Recorded {
         &self.inner
     }
 
+    /// The environment, for settings that apply from its next reset (task weights).
+    pub fn inner_mut(&mut self) -> &mut GraspEnv {
+        &mut self.inner
+    }
+
     fn finish(&mut self) {
         if let (Some(episode), Some(recorder)) = (self.episode.take(), &self.recorder) {
             lock(recorder).end_episode(episode.stream);
@@ -146,5 +151,9 @@ impl Environment for Recorded {
             self.log_step(&step);
         }
         Ok(step)
+    }
+
+    fn episode_tag(&self) -> Option<usize> {
+        self.inner.episode_tag()
     }
 }

@@ -89,7 +89,10 @@ impl PolicyService {
             .map_err(|e| internal(&e))?;
         let mask = machine.action_mask(stage);
         let stage_name = machine.stage_name(stage).to_string();
-        let action = policy.act(&state, stage, &mask).map_err(|e| internal(&e))?;
+        // A robot gets the deterministic action: the same observation, the same command.
+        let action = policy
+            .act(&state, stage, &mask, None)
+            .map_err(|e| internal(&e))?;
         let value = policy
             .value(&state, stage, &mask)
             .map_err(|e| internal(&e))?;

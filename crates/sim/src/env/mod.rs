@@ -35,6 +35,8 @@ pub struct GraspEnv {
     choice: TaskChoice,
     /// Per-task topology overrides (forced, or the selection network's picks).
     topologies: Option<Vec<Topology>>,
+    /// Per-task sampling weights over the task choice (a curriculum); uniform when absent.
+    task_weights: Option<Vec<f32>>,
     task_index: usize,
     scene: Option<Scene>,
     judge: Option<Judge>,
@@ -68,6 +70,7 @@ impl GraspEnv {
             clipped: 0,
             hand_contacts: ContactMetrics::default(),
             parts: ObservationParts::default(),
+            task_weights: None,
             last_fail: None,
             mount_target: Vec3::ZERO,
         }
@@ -86,6 +89,23 @@ impl GraspEnv {
             return Err(Error::UnknownTask(format!("#{index}")));
         }
         self.choice = choice;
+        Ok(())
+    }
+
+    /// Draws the tasks of the next resets (among those of the task choice, unless it is one
+    /// fixed task) with these weights, one per task of the benchmark, or uniformly again
+    /// with `None`. Weights must be finite and not negative, with a positive sum over the
+    /// choice's tasks.
+    pub fn set_task_weights(&mut self, weights: Option<Vec<f32>>) -> Result<()> {
+        if let Some(w) = &weights {
+            let tasks = self.benchmark.tasks.len();
+            if w.len() != tasks || w.iter().any(|x| !x.is_finite() || *x < 0.0) {
+                return Err(Error::TaskWeights(format!(
+                    "{tasks} finite, non-negative values needed, got {w:?}"
+                )));
+            }
+        }
+        self.task_weights = weights;
         Ok(())
     }
 
@@ -216,10 +236,15 @@ impl GraspEnv {
     /// Resets with the task picked by the task choice.
     pub fn reset_seeded(&mut self, seed: u64) -> Result<Vec<f32>> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7a5c_0b5e_55ed_1234);
-        let task = match &self.choice {
-            TaskChoice::Fixed(index) => *index,
-            TaskChoice::Random => rng.random_range(0..self.benchmark.tasks.len()),
-            TaskChoice::Subset(list) => list[rng.random_range(0..list.len())],
+        let tasks = self.benchmark.tasks.len();
+        let task = match (&self.choice, &self.task_weights) {
+            (TaskChoice::Fixed(index), _) => *index,
+            (TaskChoice::Random, None) => rng.random_range(0..tasks),
+            (TaskChoice::Subset(list), None) => list[rng.random_range(0..list.len())],
+            (TaskChoice::Random, Some(weights)) => {
+                weighted(&(0..tasks).collect::<Vec<_>>(), weights, &mut rng)
+            }
+            (TaskChoice::Subset(list), Some(weights)) => weighted(list, weights, &mut rng),
         };
         self.reset_task(task, seed)
     }
@@ -404,6 +429,24 @@ impl GraspEnv {
     }
 }
 
+/// One of `candidates` drawn with probability proportional to its weight (uniformly when
+/// their weights sum to zero).
+fn weighted(candidates: &[usize], weights: &[f32], rng: &mut ChaCha8Rng) -> usize {
+    let weight = |t: usize| weights.get(t).copied().unwrap_or(0.0);
+    let total: f32 = candidates.iter().map(|&t| weight(t)).sum();
+    if total <= 0.0 {
+        return candidates[rng.random_range(0..candidates.len())];
+    }
+    let mut left = rng.random::<f32>() * total;
+    for &t in candidates {
+        left -= weight(t);
+        if left < 0.0 {
+            return t;
+        }
+    }
+    candidates[candidates.len() - 1]
+}
+
 impl crm::Environment for GraspEnv {
     fn reset(&mut self, seed: u64) -> std::result::Result<Vec<f32>, String> {
         self.reset_seeded(seed).map_err(|e| e.to_string())
@@ -418,5 +461,9 @@ impl crm::Environment for GraspEnv {
 
     fn step(&mut self, action: &[f32]) -> std::result::Result<crm::EnvStep, String> {
         self.step_action(action).map_err(|e| e.to_string())
+    }
+
+    fn episode_tag(&self) -> Option<usize> {
+        Some(self.task_index)
     }
 }
