@@ -20,15 +20,8 @@ fn train(seed: u64) -> String {
     )
 }
 
-fn post(addr: &str, path: &str, body: &str) -> Value {
-    let reply = http(addr, "POST", path, Some(body), Some(TOKEN));
-    assert_eq!(
-        reply.status,
-        201,
-        "{}",
-        String::from_utf8_lossy(&reply.body)
-    );
-    reply.json()
+fn post(addr: &str, body: &str) -> Value {
+    submit_as(addr, body, Some(TOKEN))
 }
 
 fn files(dir: &Path) -> BTreeSet<String> {
@@ -60,12 +53,8 @@ fn old_checkpoints_are_removed_and_a_deleted_run_leaves_nothing_behind() {
         &format!("http://{}", server.grpc),
         &["--token", TOKEN, "--checkpoint-every-s", "1"],
     );
-    let a = post(&addr, "/api/v1/jobs", &train(1))["id"]
-        .as_i64()
-        .expect("id");
-    let b = post(&addr, "/api/v1/jobs", &train(2))["id"]
-        .as_i64()
-        .expect("id");
+    let a = post(&addr, &train(1))["id"].as_i64().expect("id");
+    let b = post(&addr, &train(2))["id"].as_i64().expect("id");
 
     // A running run cannot be deleted.
     wait_state(&addr, a, "running", 120);
@@ -110,7 +99,6 @@ fn old_checkpoints_are_removed_and_a_deleted_run_leaves_nothing_behind() {
         .expect("final");
     let eval = post(
         &addr,
-        "/api/v1/jobs",
         &format!(r#"{{"kind": "eval", "checkpoint_id": {final_a}, "episodes": 2}}"#),
     )["id"]
         .as_i64()

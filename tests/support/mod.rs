@@ -268,7 +268,12 @@ pub fn wait_state(addr: &str, id: i64, state: &str, secs: u64) -> Value {
 
 /// Submits a job (JSON text) and returns the stored job; any status but 201 fails the test.
 pub fn submit(addr: &str, body: &str) -> Value {
-    let reply = http(addr, "POST", "/api/v1/jobs", Some(body), None);
+    submit_as(addr, body, None)
+}
+
+/// [`submit`] with a bearer token.
+pub fn submit_as(addr: &str, body: &str, token: Option<&str>) -> Value {
+    let reply = http(addr, "POST", "/api/v1/jobs", Some(body), token);
     assert_eq!(
         reply.status,
         201,

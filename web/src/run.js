@@ -27,6 +27,8 @@ export async function renderRun(main, idText) {
   const recording = el('div', { id: 'recording' });
   const deleteButton = el('button', { type: 'button', id: 'delete-run', class: 'danger', onclick: () => remove() }, 'Delete run');
   const episodesInput = el('input', { type: 'text', inputmode: 'numeric', value: '100', name: 'eval-episodes', size: 6 });
+  // Evaluations sample the policy (the paper's way) unless the mean action is asked for.
+  const meanInput = el('input', { type: 'checkbox', name: 'eval-deterministic' });
 
   const drawCharts = () => {
     const { smooth, x } = chartSettings();
@@ -41,7 +43,8 @@ export async function renderRun(main, idText) {
     el('div', { class: 'charts' }, figures),
     message,
     el('h2', {}, 'Checkpoints'),
-    el('p', { class: 'muted' }, 'Evaluate with ', episodesInput, ' episodes; the result appears under Evaluations.'),
+    el('p', { class: 'muted' }, 'Evaluate with ', episodesInput, ' episodes (',
+      el('label', {}, meanInput, ' mean action instead of sampled'), '); the result appears under Evaluations.'),
     el('table', { id: 'checkpoints' }, el('thead', {}, el('tr', {},
       ['id', 'steps', 'size', 'saved', ''].map((h) => el('th', {}, h)))), checkpoints),
     el('h2', {}, 'Evaluations'), evaluations,
@@ -64,7 +67,9 @@ export async function renderRun(main, idText) {
     const text = episodesInput.value.trim();
     const count = /^\d+$/.test(text) ? Number(text) : text;
     try {
-      const job = await send('POST', '/api/v1/jobs', { kind: 'eval', checkpoint_id: checkpoint.id, episodes: count });
+      const body = { kind: 'eval', checkpoint_id: checkpoint.id, episodes: count };
+      if (meanInput.checked) body.deterministic = true;
+      const job = await send('POST', '/api/v1/jobs', body);
       message.replaceChildren(el('div', { class: 'ok' }, `Evaluation job ${job.id} queued for checkpoint ${checkpoint.id}.`));
     } catch (err) {
       message.replaceChildren(errorBox(err.field ? new Error(`${err.field}: ${err.message}`) : err));

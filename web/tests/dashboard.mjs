@@ -133,6 +133,18 @@ check('a run page draws its curves, lists checkpoints and evaluations', async ()
   // Run a records every episode: the section offers the file and the viewer command.
   await page.waitForSelector('#recording a[href$="/recording"]');
   assert.match(await page.textContent('#recording'), new RegExp(`rerun http://.*/api/v1/jobs/${runA}/recording`));
+  // Evaluate a checkpoint with the mean action from the page: the job asks for it.
+  await page.fill('input[name="eval-episodes"]', '3');
+  await page.check('input[name="eval-deterministic"]');
+  await page.click('#checkpoints tr[data-checkpoint] button:has-text("Evaluate")');
+  await page.waitForSelector('.message .ok:has-text("Evaluation job")');
+  const queued = Number((await page.textContent('.message .ok')).match(/Evaluation job (\d+)/)[1]);
+  const job = await api(`/api/v1/jobs/${queued}`);
+  assert.equal(job.spec.deterministic, true);
+  assert.equal(job.spec.episodes, 3);
+  // No worker runs now: cancel it so the other pages see only finished evaluations.
+  const cancelled = await fetch(`${base}/api/v1/jobs/${queued}/cancel`, { method: 'POST' });
+  assert.equal(cancelled.status, 200);
   // The episode table shows an evaluation's stage transitions.
   assert.ok((await page.$$('#episodes tbody tr')).length >= 1, 'episode rows');
   // Another x axis redraws the charts.
