@@ -202,6 +202,10 @@ pub struct SacConfig {
     /// Early stop as for PPO. Paper V-B-2: 99% over the most recent 100 episodes.
     pub early_stop_success: f32,
     pub early_stop_window: usize,
+    /// Running observation normalization per stage and feature, as for PPO (SB3
+    /// `VecNormalize`, which the authors used; SB3's replay buffer stores raw observations
+    /// and normalizes them with the current statistics when it samples, as here). On.
+    pub norm_obs: bool,
 }
 
 impl Default for SacConfig {
@@ -219,6 +223,7 @@ impl Default for SacConfig {
             target_entropy_per_dim: -1.0,
             early_stop_success: 0.99,
             early_stop_window: 100,
+            norm_obs: true,
         }
     }
 }

@@ -62,10 +62,28 @@ fn refuse(path: &Path, message: impl Into<String>) -> Error {
 impl Checkpoint {
     /// Writes the networks, their observation statistics and the header to `path`.
     pub fn save(net: &ActorCritic, header: &CheckpointHeader, path: &Path) -> Result<()> {
-        let (mean, var, count) = net.norm().to_parts();
-        let layout = net.layout();
-        let device = net.device();
-        let shape = (layout.stages, layout.state_width);
+        Self::save_normalized(net.params(), net.norm(), header, path)
+    }
+
+    /// Writes CRM-SAC's networks, their observation statistics and the header to `path`.
+    pub fn save_sac(
+        nets: &crate::sac::SacNets,
+        header: &CheckpointHeader,
+        path: &Path,
+    ) -> Result<()> {
+        Self::save_normalized(&nets.params, nets.norm(), header, path)
+    }
+
+    /// Writes named parameters with the observation statistics they were trained with.
+    fn save_normalized(
+        params: &[(String, candle_core::Var)],
+        norm: &ObsNorm,
+        header: &CheckpointHeader,
+        path: &Path,
+    ) -> Result<()> {
+        let (mean, var, count) = norm.to_parts();
+        let device = &candle_core::Device::Cpu;
+        let shape = (norm.stage_count(), norm.width());
         let stats = [
             (
                 NORM_MEAN,
@@ -74,11 +92,11 @@ impl Checkpoint {
             (NORM_VAR, candle_core::Tensor::from_vec(var, shape, device)?),
             (
                 NORM_COUNT,
-                candle_core::Tensor::from_vec(count, layout.stages, device)?,
+                candle_core::Tensor::from_vec(count, norm.stage_count(), device)?,
             ),
         ];
         Self::write(
-            named(net.params())
+            named(params)
                 .chain(stats.iter().map(|(name, t)| (*name, t)))
                 .collect(),
             header,
@@ -189,7 +207,7 @@ impl Checkpoint {
         Ok(tensors)
     }
 
-    /// The observation statistics stored beside a PPO-family network.
+    /// The observation statistics stored beside the networks.
     fn norm_of(
         tensors: &HashMap<String, candle_core::Tensor>,
         layout: crate::network::Layout,
@@ -251,8 +269,9 @@ impl Checkpoint {
                 format!("a {} checkpoint, not crm-sac", header.algorithm),
             ));
         }
-        let nets = crate::sac::SacNets::new(header.layout, &header.hidden, 0)?;
-        Self::fill(&bytes, path, &nets.params)?;
+        let mut nets = crate::sac::SacNets::new(header.layout, &header.hidden, 0)?;
+        let tensors = Self::fill(&bytes, path, &nets.params)?;
+        nets.set_norm(Self::norm_of(&tensors, header.layout, path)?)?;
         Ok((nets, header))
     }
 }
@@ -360,6 +379,51 @@ mod tests {
             "{err}"
         );
         for p in [path, junk, bare, stale] {
+            std::fs::remove_file(p).ok();
+        }
+    }
+
+    #[test]
+    fn a_sac_checkpoint_keeps_its_observation_statistics_and_needs_them() {
+        let layout = Layout {
+            state_width: 4,
+            stages: 3,
+            actions: 5,
+        };
+        let mut nets = crate::sac::SacNets::new(layout, &[16, 16], 3).expect("nets");
+        nets.update_norm(&[vec![1.0, 2.0], vec![3.0, -4.0, 0.5]], &[0, 2]);
+        let header = CheckpointHeader {
+            format: FORMAT.into(),
+            algorithm: "crm-sac".into(),
+            spec_hash: "abc123".into(),
+            env_version: "grasp-sim/test".into(),
+            seed: 3,
+            steps: 10,
+            layout,
+            hidden: vec![16, 16],
+            config: serde_json::json!({}),
+        };
+        let path = temp("sac.safetensors");
+        Checkpoint::save_sac(&nets, &header, &path).expect("save");
+        let (loaded, _) = Checkpoint::load_sac(&path, "abc123", "grasp-sim/test").expect("load");
+        assert_eq!(loaded.norm(), nets.norm());
+        let input = |n: &crate::sac::SacNets| -> Vec<f32> {
+            n.input(&[vec![2.0, -1.0]], &[0])
+                .and_then(|t| Ok(t.flatten_all()?.to_vec1::<f32>()?))
+                .expect("input")
+        };
+        assert_eq!(input(&loaded), input(&nets), "the same normalized input");
+        let stale = temp("sac-stale.safetensors");
+        Checkpoint::save_params(&nets.params, &header, &stale).expect("write");
+        let err = Checkpoint::load_sac(&stale, "abc123", "grasp-sim/test")
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("no observation-normalizer statistics"),
+            "{err}"
+        );
+        for p in [path, stale] {
             std::fs::remove_file(p).ok();
         }
     }

@@ -8,9 +8,10 @@ use candle_core::{D, Device, Tensor, Var};
 use candle_nn::{AdamW, Linear, Optimizer, ParamsAdamW};
 use crm_api::SacConfig;
 
-use crate::error::Result;
-use crate::network::{Layout, encode, mlp, run};
+use crate::error::{Error, Result};
+use crate::network::{Layout, encode_normalized, mlp, run};
 use crate::noise::Noise;
+use crate::normalize::ObsNorm;
 use crate::rollout::{Actor, Rollout};
 
 const LOG_STD_MIN: f64 = -5.0;
@@ -29,6 +30,8 @@ pub struct SacNets {
     /// `(name, var)`: actor, critics, targets, temperature.
     pub params: Vec<(String, Var)>,
     device: Device,
+    /// The observation statistics the inputs are normalized with (stored in checkpoints).
+    norm: ObsNorm,
 }
 
 impl SacNets {
@@ -60,6 +63,7 @@ impl SacNets {
             log_alpha,
             params,
             device,
+            norm: ObsNorm::new(layout.stages, layout.state_width),
         };
         // Targets start as copies of the critics.
         nets.polyak(1.0)?;
@@ -85,8 +89,33 @@ impl SacNets {
         Ok(())
     }
 
+    /// The network input: normalized abstract states (see `normalize.rs`) and the one-hot
+    /// stage.
     pub fn input(&self, states: &[Vec<f32>], stages: &[usize]) -> Result<Tensor> {
-        encode(self.layout, states, stages, &self.device)
+        encode_normalized(self.layout, states, stages, Some(&self.norm), &self.device)
+    }
+
+    /// The observation statistics the inputs are normalized with.
+    pub fn norm(&self) -> &ObsNorm {
+        &self.norm
+    }
+
+    /// Folds a batch of raw abstract states into the observation statistics.
+    pub fn update_norm(&mut self, states: &[Vec<f32>], stages: &[usize]) {
+        self.norm.update(states, stages);
+    }
+
+    /// Replaces the observation statistics (checkpoints); they must fit the layout.
+    pub fn set_norm(&mut self, norm: ObsNorm) -> Result<()> {
+        if norm.stage_count() != self.layout.stages || norm.width() != self.layout.state_width {
+            return Err(Error::Length {
+                what: "observation statistics",
+                expected: self.layout.stages * self.layout.state_width,
+                got: norm.stage_count() * norm.width(),
+            });
+        }
+        self.norm = norm;
+        Ok(())
     }
 
     /// Pre-squash means and clamped log standard deviations `[batch, actions]` each.
@@ -223,7 +252,7 @@ impl Sac {
         for ((_, mine), (_, theirs)) in self.nets.params.iter().zip(&other.params) {
             mine.set(theirs.as_tensor())?;
         }
-        Ok(())
+        self.nets.set_norm(other.norm().clone())
     }
 
     /// Transitions stored so far (over the whole run).
@@ -237,8 +266,12 @@ impl Sac {
         Ok(Tensor::from_vec(data, (rows, n), &self.nets.device)?)
     }
 
-    /// Stores a rollout's transitions (the CRM reward: intra-stage plus transition).
+    /// Stores a rollout's transitions (the CRM reward: intra-stage plus transition), raw, and
+    /// folds its states into the observation statistics (`norm_obs`).
     pub fn store(&mut self, rollout: &Rollout) {
+        if self.config.norm_obs {
+            self.nets.update_norm(&rollout.states, &rollout.stages);
+        }
         for t in 0..rollout.len() {
             let item = Stored {
                 state: rollout.states[t].clone(),

@@ -321,7 +321,7 @@ impl Trainer {
         let partial = path.with_extension("safetensors.partial");
         match &self.learner {
             Learner::Ppo(ppo) => Checkpoint::save(&ppo.net, &header, &partial)?,
-            Learner::Sac(sac) => Checkpoint::save_params(&sac.nets.params, &header, &partial)?,
+            Learner::Sac(sac) => Checkpoint::save_sac(&sac.nets, &header, &partial)?,
         }
         std::fs::rename(&partial, path)
             .with_context(|| format!("moving the checkpoint to {}", path.display()))?;
