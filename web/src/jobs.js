@@ -134,6 +134,7 @@ function submitForm(catalog, onQueued) {
     envs: el('input', { id: 'f-envs', name: 'envs', type: 'text', inputmode: 'numeric', placeholder: 'one per worker core' }),
     config: el('textarea', { id: 'f-config', name: 'config', rows: 3, placeholder: '{"learning_rate": 0.0003}' }),
     imitation: el('input', { id: 'f-imitation', name: 'imitation', type: 'text', inputmode: 'numeric', placeholder: 'off' }),
+    curriculum: el('input', { id: 'f-curriculum', name: 'curriculum', type: 'checkbox' }),
     objective: el('select', { id: 'f-objective', name: 'objective' },
       el('option', { value: 'scripted' }, 'scripted (the paper: the arm executes it)'),
       el('option', { value: 'learned' }, 'learned (the policy executes it)')),
@@ -149,6 +150,7 @@ function submitForm(catalog, onQueued) {
     field('envs', 'environments', inputs.envs),
     field('config', 'config (JSON)', inputs.config, 'PPO settings, or SAC settings under "sac" for crm-sac'),
     field('imitation', 'clone the oracle first (episodes)', inputs.imitation, 'behaviour cloning before PPO (crm-ppo, ippo, lppo)'),
+    field('curriculum', 'task curriculum', inputs.curriculum, 'draw tasks more often where the policy fails (the paper: uniform)'),
   ];
   const evalOnly = [
     field('checkpoint_id', 'checkpoint id', inputs.checkpoint_id),
@@ -201,6 +203,7 @@ function submitForm(catalog, onQueued) {
       body.envs = number('envs');
       const imitation = number('imitation');
       if (imitation !== undefined) body.imitation = { episodes: imitation };
+      if (inputs.curriculum.checked) body.curriculum = true;
       const text = inputs.config.value.trim();
       if (text) {
         try {
