@@ -94,8 +94,8 @@ impl GraspEnv {
 
     /// Draws the tasks of the next resets (among those of the task choice, unless it is one
     /// fixed task) with these weights, one per task of the benchmark, or uniformly again
-    /// with `None`. Weights must be finite and not negative, with a positive sum over the
-    /// choice's tasks.
+    /// with `None`. Weights must be finite and not negative; where they sum to zero over the
+    /// choice's tasks, those are drawn uniformly.
     pub fn set_task_weights(&mut self, weights: Option<Vec<f32>>) -> Result<()> {
         if let Some(w) = &weights {
             let tasks = self.benchmark.tasks.len();
