@@ -424,8 +424,15 @@ fn behaviour_cloning_of_the_oracle_warms_up_a_ppo_policy() {
 }
 
 /// Success rate of `crm eval` on box-lift (20 deterministic episodes).
+/// Runs `crm` with `args`, which must succeed, and parses its one JSON object.
+fn crm_json(args: &[&str]) -> serde_json::Value {
+    let (code, stdout, stderr) = crm(args);
+    assert_eq!(code, 0, "{stderr}");
+    serde_json::from_str(&stdout).expect("JSON")
+}
+
 fn box_lift_success(checkpoint: &std::path::Path) -> f64 {
-    let (code, stdout, stderr) = crm(&[
+    let report = crm_json(&[
         "eval",
         "--checkpoint",
         &checkpoint.to_string_lossy(),
@@ -435,8 +442,6 @@ fn box_lift_success(checkpoint: &std::path::Path) -> f64 {
         "20",
         "--json",
     ]);
-    assert_eq!(code, 0, "{stderr}");
-    let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
     report["success_rate"].as_f64().expect("rate")
 }
 
@@ -503,9 +508,7 @@ fn evaluation_samples_by_default_and_repeats_with_its_seed() {
             "--json",
         ];
         args.extend_from_slice(extra);
-        let (code, stdout, stderr) = crm(&args);
-        assert_eq!(code, 0, "{stderr}");
-        let mut report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+        let mut report = crm_json(&args);
         report.as_object_mut().expect("object").remove("checkpoint");
         report
     };

@@ -40,6 +40,18 @@ impl Layout {
     pub fn input_width(&self) -> usize {
         self.state_width + self.stages
     }
+
+    /// Refuses observation statistics of another shape than this layout's states.
+    pub fn check_norm(&self, norm: &ObsNorm) -> Result<()> {
+        if norm.stage_count() != self.stages || norm.width() != self.state_width {
+            return Err(Error::Length {
+                what: "observation statistics",
+                expected: self.stages * self.state_width,
+                got: norm.stage_count() * norm.width(),
+            });
+        }
+        Ok(())
+    }
 }
 
 /// The actor and the critic, with their parameters in a stable, named order.
@@ -174,13 +186,7 @@ impl ActorCritic {
 
     /// Replaces the observation statistics (checkpoints, resuming); they must fit the layout.
     pub fn set_norm(&mut self, norm: ObsNorm) -> Result<()> {
-        if norm.stage_count() != self.layout.stages || norm.width() != self.layout.state_width {
-            return Err(Error::Length {
-                what: "observation statistics",
-                expected: self.layout.stages * self.layout.state_width,
-                got: norm.stage_count() * norm.width(),
-            });
-        }
+        self.layout.check_norm(&norm)?;
         self.norm = norm;
         Ok(())
     }

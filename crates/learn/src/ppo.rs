@@ -123,17 +123,8 @@ impl Ppo {
         masks: &[Vec<f32>],
         deterministic: bool,
     ) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
-        let means: Vec<Vec<f32>> = self.net.mean(&self.net.input(states, stages)?)?.to_vec2()?;
-        let log_std = self.log_std()?;
         let noise = (!deterministic).then_some(&mut self.noise);
-        Ok(sample_rows(&means, &log_std, masks, noise))
-    }
-
-    /// The policy's log standard deviations as ln(std) rather than the stored log std: the
-    /// log-probabilities keep the bits the shipped model and the seeded tests were trained
-    /// with.
-    fn log_std(&self) -> Result<Vec<f32>> {
-        Ok(self.net.std()?.iter().map(|s| s.ln()).collect())
+        sample_policy(&self.net, states, stages, masks, noise)
     }
 
     /// [`Self::act_batch`] for one state.
@@ -304,20 +295,26 @@ impl Ppo {
     }
 }
 
-/// Gaussian actions around `means` (the means themselves without `noise`) and their
-/// log-probabilities over the live dimensions of `masks`; noise drawn row by row in order.
-fn sample_rows(
-    means: &[Vec<f32>],
-    log_std: &[f32],
+/// The policy of `net` at a batch of abstract states: Gaussian actions around its means (the
+/// means themselves without `noise`) and their log-probabilities over the live dimensions of
+/// `masks`; noise drawn row by row in order. The log standard deviations are taken as
+/// ln(std) rather than the stored log std: the log-probabilities keep the bits the shipped
+/// model and the seeded tests were trained with.
+fn sample_policy(
+    net: &ActorCritic,
+    states: &[Vec<f32>],
+    stages: &[usize],
     masks: &[Vec<f32>],
     mut noise: Option<&mut Noise>,
-) -> (Vec<Vec<f32>>, Vec<f32>) {
+) -> Result<(Vec<Vec<f32>>, Vec<f32>)> {
+    let means: Vec<Vec<f32>> = net.mean(&net.input(states, stages)?)?.to_vec2()?;
+    let log_std: Vec<f32> = net.std()?.iter().map(|s| s.ln()).collect();
     let mut actions = Vec::with_capacity(means.len());
     let mut log_probs = Vec::with_capacity(means.len());
     for (row, mask) in means.iter().zip(masks) {
         let mut action = Vec::with_capacity(row.len());
         let mut log_prob = 0.0f32;
-        for ((&m, &ls), &live) in row.iter().zip(log_std).zip(mask) {
+        for ((&m, &ls), &live) in row.iter().zip(&log_std).zip(mask) {
             let z = noise.as_mut().map_or(0.0, |n| n.normal());
             action.push(m + ls.exp() * z);
             log_prob += live * (-0.5 * z * z - ls - HALF_LOG_TWO_PI);
@@ -325,7 +322,7 @@ fn sample_rows(
         actions.push(action);
         log_probs.push(log_prob);
     }
-    (actions, log_probs)
+    Ok((actions, log_probs))
 }
 
 impl Actor for Ppo {
@@ -340,10 +337,13 @@ impl Actor for Ppo {
         mask: &[f32],
         noise: &mut Noise,
     ) -> Result<(Vec<f32>, f32)> {
-        let input = self.net.input(&[state.to_vec()], &[stage])?;
-        let means: Vec<Vec<f32>> = self.net.mean(&input)?.to_vec2()?;
-        let (mut actions, log_probs) =
-            sample_rows(&means, &self.log_std()?, &[mask.to_vec()], Some(noise));
+        let (mut actions, log_probs) = sample_policy(
+            &self.net,
+            &[state.to_vec()],
+            &[stage],
+            &[mask.to_vec()],
+            Some(noise),
+        )?;
         Ok((actions.pop().unwrap_or_default(), log_probs[0]))
     }
 

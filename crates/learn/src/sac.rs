@@ -8,7 +8,7 @@ use candle_core::{D, Device, Tensor, Var};
 use candle_nn::{AdamW, Linear, Optimizer, ParamsAdamW};
 use crm_api::SacConfig;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::network::{Layout, encode_normalized, mlp, run};
 use crate::noise::Noise;
 use crate::normalize::ObsNorm;
@@ -107,13 +107,7 @@ impl SacNets {
 
     /// Replaces the observation statistics (checkpoints); they must fit the layout.
     pub fn set_norm(&mut self, norm: ObsNorm) -> Result<()> {
-        if norm.stage_count() != self.layout.stages || norm.width() != self.layout.state_width {
-            return Err(Error::Length {
-                what: "observation statistics",
-                expected: self.layout.stages * self.layout.state_width,
-                got: norm.stage_count() * norm.width(),
-            });
-        }
+        self.layout.check_norm(&norm)?;
         self.norm = norm;
         Ok(())
     }

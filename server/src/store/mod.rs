@@ -222,11 +222,7 @@ impl Store {
     // ---- jobs ----
 
     pub async fn create_job(&self, job: NewJob<'_>) -> Result<Job> {
-        let id: i64 = sqlx::query_scalar("INSERT INTO jobs (kind, state, algorithm, task, spec, checkpoint_id, rerun_of, created_at) VALUES (?, 'queued', ?, ?, ?, ?, ?, ?) RETURNING id")
-            .bind(job.kind).bind(job.algorithm).bind(job.task).bind(job.spec)
-            .bind(job.checkpoint_id).bind(job.rerun_of).bind(now_ms())
-            .fetch_one(&self.pool)
-            .await?;
+        let id = insert_job(&self.pool, &job).await?;
         self.job(id).await
     }
 
@@ -244,11 +240,7 @@ impl Store {
             return Ok((found, false));
         }
         let mut tx = self.pool.begin().await?;
-        let id: i64 = sqlx::query_scalar("INSERT INTO jobs (kind, state, algorithm, task, spec, checkpoint_id, rerun_of, created_at) VALUES (?, 'queued', ?, ?, ?, ?, ?, ?) RETURNING id")
-            .bind(job.kind).bind(job.algorithm).bind(job.task).bind(job.spec)
-            .bind(job.checkpoint_id).bind(job.rerun_of).bind(now_ms())
-            .fetch_one(&mut *tx)
-            .await?;
+        let id = insert_job(&mut *tx, &job).await?;
         let keyed = sqlx::query(
             "INSERT INTO idempotency_keys (key, request, job_id, created_at) VALUES (?, ?, ?, ?)",
         )
@@ -617,6 +609,18 @@ impl Store {
     pub fn checkpoint_path(&self, row: &CheckpointRow) -> PathBuf {
         self.checkpoints.join(&row.file)
     }
+}
+
+/// Queues a new job; returns its id.
+async fn insert_job<'e>(
+    conn: impl sqlx::Executor<'e, Database = sqlx::Sqlite>,
+    job: &NewJob<'_>,
+) -> Result<i64> {
+    Ok(sqlx::query_scalar("INSERT INTO jobs (kind, state, algorithm, task, spec, checkpoint_id, rerun_of, created_at) VALUES (?, 'queued', ?, ?, ?, ?, ?, ?) RETURNING id")
+        .bind(job.kind).bind(job.algorithm).bind(job.task).bind(job.spec)
+        .bind(job.checkpoint_id).bind(job.rerun_of).bind(now_ms())
+        .fetch_one(conn)
+        .await?)
 }
 
 /// Removes a file whose row is gone; a file already missing is fine, another failure is
