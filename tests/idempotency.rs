@@ -72,9 +72,9 @@ fn a_retried_key_returns_the_first_job_and_another_request_under_it_is_refused()
     assert_eq!(later.json()["id"], id);
     assert_eq!(later.json()["state"], "cancelled");
 
-    // Another request under the key: 422 naming the header, nothing stored.
+    // Another request under the key: 409 naming the header, nothing stored.
     let other = submit_with_key(&addr, "run-42", &train(1)).expect("other body");
-    assert_eq!(other.status, 422);
+    assert_eq!(other.status, 409);
     assert_eq!(other.json()["error"]["field"], "Idempotency-Key");
     assert_eq!(job_count(&addr), 1);
 

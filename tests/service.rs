@@ -133,7 +133,6 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
             r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "config": {"gama": 0.9}}"#,
             "config.gama",
         ),
-        (r#"{"kind": "eval", "checkpoint_id": 999}"#, "checkpoint_id"),
         (
             r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "topology": "claw"}"#,
             "topology",
@@ -170,6 +169,16 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
         assert_eq!(reply.status, 400, "{body}");
         assert_eq!(error_field(&reply), field, "{body}: {}", reply.json());
     }
+    // An evaluation of a checkpoint that does not exist: 404 naming the field.
+    let missing = http(
+        &addr,
+        "POST",
+        "/api/v1/jobs",
+        Some(r#"{"kind": "eval", "checkpoint_id": 999}"#),
+        None,
+    );
+    assert_eq!(missing.status, 404);
+    assert_eq!(error_field(&missing), "checkpoint_id");
     assert_eq!(
         http(&addr, "GET", "/api/v1/jobs/12345", None, None).status,
         404
@@ -301,4 +310,44 @@ fn tokens_guard_workers_and_mutating_calls() {
     );
     let job = get(&addr, "/api/v1/jobs")["jobs"][0].clone();
     assert_eq!(job["state"], "queued");
+}
+
+#[test]
+fn a_job_building_demonstrations_shows_its_phase_and_can_be_cancelled_in_it() {
+    let data = TempDir::new("phase");
+    let server = start_server(&data.0, &[]);
+    let addr = server.http.clone();
+    let _worker = start_worker(&format!("http://{}", server.grpc), &[]);
+    let job = submit(
+        &addr,
+        r#"{"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 64, "seed": 1, "envs": 1, "imitation": {"episodes": 20000, "epochs": 1}}"#,
+    );
+    let id = job["id"].as_i64().expect("id");
+    // The oracle's episodes are counted while they run: some done, not all.
+    let phase = wait_for(120, "a demonstrations phase under way", || {
+        let job = get(&addr, &format!("/api/v1/jobs/{id}"));
+        let phase = &job["phase"];
+        let done = phase["done"].as_u64().unwrap_or(0);
+        (phase["name"] == "demonstrations" && done > 0 && done < 20000).then(|| phase.clone())
+    });
+    assert_eq!(phase["total"], 20000, "{phase}");
+    let run = get(&addr, &format!("/api/v1/runs/{id}"));
+    assert_eq!(run["run"]["phase"]["name"], "demonstrations");
+    // Cancelling stops the phase: the job ends cancelled, with no training step taken.
+    let cancelled = http(
+        &addr,
+        "POST",
+        &format!("/api/v1/jobs/{id}/cancel"),
+        None,
+        None,
+    );
+    assert_eq!(cancelled.status, 200);
+    let done = wait_state(&addr, id, "cancelled", 60);
+    assert_eq!(done["steps"], 0, "{done}");
+    // The worker is free again: a job after it runs.
+    let next = submit(
+        &addr,
+        r#"{"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 64, "seed": 2, "envs": 1, "config": {"rollout_steps": 64}}"#,
+    );
+    wait_state(&addr, next["id"].as_i64().expect("id"), "succeeded", 120);
 }

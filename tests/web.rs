@@ -48,7 +48,9 @@ fn the_dashboard_works_in_chromium() {
     );
 
     let data = TempDir::new("web");
-    let server = start_server(&data.0, &[]);
+    // The shipped models are registered on this new data folder (the models page lists them).
+    let models = root.join("models");
+    let server = start_server(&data.0, &["--models", models.to_str().expect("utf-8 path")]);
     let addr = server.http.clone();
     let mut worker = start_worker(&format!("http://{}", server.grpc), &[]);
 
@@ -100,6 +102,7 @@ fn the_dashboard_works_in_chromium() {
         .current_dir(&web)
         .env("CRM_BASE", format!("http://{addr}"))
         .env("CRM_SEED", json!({"runs": runs}).to_string())
+        .env("CRM_MODEL", models.join("crm-ppo.safetensors"))
         .output()
         .expect("run node (is Node.js installed?)");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -108,6 +111,6 @@ fn the_dashboard_works_in_chromium() {
         out.status.success(),
         "browser checks failed:\n{stdout}\n{stderr}"
     );
-    assert!(stdout.contains("8 of 8 browser checks passed"), "{stdout}");
+    assert!(stdout.contains("9 of 9 browser checks passed"), "{stdout}");
     println!("{stdout}");
 }

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 /// Coordinator settings. Defaults: REST on 127.0.0.1:8080, gRPC on 127.0.0.1:50051, data in
-/// `./data`, no token.
+/// `./data`, no token, the shipped models from `./models`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(default, deny_unknown_fields)]
 pub struct ServerConfig {
@@ -46,6 +46,10 @@ pub struct ServerConfig {
     /// file and row, unless an evaluation job names them).
     #[arg(long, default_value_t = 3)]
     pub keep_checkpoints: u32,
+    /// Folder of shipped policy checkpoints registered, as uploads, when the coordinator
+    /// starts on a new data folder (skipped when missing).
+    #[arg(long, default_value = "models")]
+    pub models: PathBuf,
 }
 
 impl Default for ServerConfig {
@@ -63,6 +67,7 @@ impl Default for ServerConfig {
             max_recording_bytes: 1024 * 1024 * 1024,
             episodes_kept: 200,
             keep_checkpoints: 3,
+            models: PathBuf::from("models"),
         }
     }
 }

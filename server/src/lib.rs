@@ -9,6 +9,7 @@ pub mod charts;
 pub mod config;
 pub mod grpc;
 pub mod store;
+pub mod uploads;
 pub mod web;
 
 use std::net::SocketAddr;
@@ -92,6 +93,12 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
         config: config.clone(),
         events: tokio::sync::watch::channel(0).0,
     });
+    if state.store.created() && config.models.is_dir() {
+        let n = uploads::register_dir(&state, &config.models)
+            .await
+            .with_context(|| format!("registering the models in {}", config.models.display()))?;
+        tracing::info!(models = n, dir = %config.models.display(), "shipped models registered");
+    }
     let http = tokio::net::TcpListener::bind(&config.http)
         .await
         .with_context(|| format!("binding the HTTP address {}", config.http))?;

@@ -44,6 +44,11 @@ const ASSETS: &[(&str, &str, &str)] = &[
         include_str!("../../web/src/compare.js"),
     ),
     (
+        "models.js",
+        "text/javascript",
+        include_str!("../../web/src/models.js"),
+    ),
+    (
         "topology.js",
         "text/javascript",
         include_str!("../../web/src/topology.js"),
@@ -56,6 +61,7 @@ pub fn routes() -> Router<Arc<AppState>> {
         .route("/", get(page))
         .route("/compare", get(page))
         .route("/topology", get(page))
+        .route("/models", get(page))
         .route("/runs/{id}", get(run_page))
         .route("/assets/{name}", get(asset))
 }

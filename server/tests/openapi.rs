@@ -45,3 +45,44 @@ fn the_binary_refuses_bad_settings_with_exit_code_2() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("lease_ttl_s"), "{stderr}");
 }
+
+#[test]
+fn the_documents_task_and_topology_enums_are_the_catalogs() {
+    let doc: serde_json::Value =
+        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
+    let catalog = crm_api::Catalog::builtin().expect("catalog");
+    let ids: Vec<String> = catalog.tasks.iter().map(|t| t.id.clone()).collect();
+    let mut topologies = vec!["task".to_string(), "auto".to_string()];
+    topologies.extend(catalog.topologies.iter().cloned());
+    let strings = |v: &serde_json::Value| -> Vec<String> {
+        v.as_array()
+            .expect("enum")
+            .iter()
+            .filter_map(|s| s.as_str().map(String::from))
+            .collect()
+    };
+    let schemas = &doc["components"]["schemas"];
+    for name in ["TrainPpoRequest", "TrainOtherRequest", "EvalRequest"] {
+        let props = &schemas[name]["properties"];
+        assert_eq!(strings(&props["task"]["enum"]), ids, "{name}.task");
+        assert_eq!(
+            strings(&props["tasks"]["items"]["enum"]),
+            ids,
+            "{name}.tasks"
+        );
+        assert_eq!(
+            strings(&props["topology"]["enum"]),
+            topologies,
+            "{name}.topology"
+        );
+        // Both may be null (absent), and the enum says so (OpenAPI 3.0's nullable).
+        for field in ["task", "topology"] {
+            assert!(
+                props[field]["enum"]
+                    .as_array()
+                    .expect("enum")
+                    .contains(&serde_json::Value::Null)
+            );
+        }
+    }
+}

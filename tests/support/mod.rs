@@ -176,18 +176,38 @@ pub fn try_http(
     body: Option<&str>,
     headers: &[(&str, &str)],
 ) -> std::io::Result<Reply> {
+    try_http_bytes(
+        addr,
+        method,
+        path,
+        body.unwrap_or("").as_bytes(),
+        "application/json",
+        headers,
+    )
+}
+
+/// One HTTP/1.1 request with a body of any bytes. A server that answers before reading the
+/// whole body (413) may close the connection while it is written: the answer is still read.
+pub fn try_http_bytes(
+    addr: &str,
+    method: &str,
+    path: &str,
+    body: &[u8],
+    content_type: &str,
+    headers: &[(&str, &str)],
+) -> std::io::Result<Reply> {
     let mut stream = TcpStream::connect(addr)?;
     stream.set_read_timeout(Some(Duration::from_secs(30)))?;
-    let body = body.unwrap_or("");
     let extra: String = headers
         .iter()
         .map(|(k, v)| format!("{k}: {v}\r\n"))
         .collect();
     write!(
         stream,
-        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Type: application/json\r\n{extra}Content-Length: {}\r\n\r\n{body}",
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Type: {content_type}\r\n{extra}Content-Length: {}\r\n\r\n",
         body.len()
     )?;
+    stream.write_all(body).ok();
     let mut raw = Vec::new();
     stream.read_to_end(&mut raw)?;
     let broken = || std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "no complete answer");

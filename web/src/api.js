@@ -45,6 +45,14 @@ export async function send(method, path, body) {
   }));
 }
 
+/** POST raw bytes (a file) with the bearer token; answers the JSON body. */
+export async function sendBytes(method, path, bytes) {
+  const headers = { 'content-type': 'application/octet-stream' };
+  const token = localStorage.getItem('crm-token');
+  if (token) headers.authorization = `Bearer ${token}`;
+  return parse(await fetch(path, { method, headers, body: bytes }));
+}
+
 /** Builds an element: `el('a', {href: '/'}, 'text', child)`. Text is never parsed as HTML. */
 export function el(tag, attrs = {}, ...children) {
   const node = document.createElement(tag);
@@ -95,6 +103,16 @@ export function asObject(value) {
     try { return JSON.parse(value); } catch { return {}; }
   }
   return {};
+}
+
+/** A job's phase before training (`{name, done, total}`), or null. */
+export function phaseOf(job) {
+  const phase = asObject(job.phase);
+  return phase && phase.name ? phase : null;
+}
+
+export function phaseText(phase) {
+  return `${phase.name}: ${phase.done.toLocaleString()} of ${phase.total.toLocaleString()}`;
 }
 
 /** The task ids a job's spec names, or "random". */
@@ -178,4 +196,16 @@ export function chartSettings() {
     smooth: localStorage.getItem('crm-smooth') || '0.6',
     x: localStorage.getItem('crm-x') || 'steps',
   };
+}
+
+/** Bytes as KiB, MiB or GiB. */
+export function fmtBytes(bytes) {
+  const units = ['bytes', 'KiB', 'MiB', 'GiB'];
+  let value = bytes;
+  let unit = 0;
+  while (value >= 1024 && unit < units.length - 1) {
+    value /= 1024;
+    unit += 1;
+  }
+  return unit === 0 ? `${value} bytes` : `${value.toFixed(1)} ${units[unit]}`;
 }

@@ -5,6 +5,7 @@ import { renderJobs } from './jobs.js';
 import { renderRun } from './run.js';
 import { renderCompare } from './compare.js';
 import { renderTopology } from './topology.js';
+import { renderModels } from './models.js';
 
 const main = document.getElementById('main');
 const path = window.location.pathname.replace(/\/+$/, '') || '/';
@@ -35,6 +36,9 @@ if (path === '/') {
 } else if (path === '/compare') {
   nav('compare');
   renderCompare(main);
+} else if (path === '/models') {
+  nav('models');
+  renderModels(main);
 } else if (path === '/topology') {
   nav('topology');
   renderTopology(main);

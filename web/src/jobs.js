@@ -1,7 +1,7 @@
 // The jobs page: a live list with filters, cancel and re-run, selection for comparison, and
 // the form that submits training and evaluation jobs.
 import {
-  asObject, badge, duration, el, errorBox, fmtNum, fmtTime, getJson, onChange, send, tasksOf,
+  asObject, badge, duration, el, errorBox, fmtNum, fmtTime, getJson, onChange, send, tasksOf, phaseOf, phaseText,
 } from './api.js';
 
 const STATES = ['queued', 'running', 'succeeded', 'failed', 'cancelled'];
@@ -91,7 +91,10 @@ export async function renderJobs(main) {
       : job.checkpoint_id && checkpointRuns[job.checkpoint_id]
         ? el('a', { href: `/runs/${checkpointRuns[job.checkpoint_id]}`, title: `evaluates checkpoint ${job.checkpoint_id}` }, `#${job.id}`)
         : `#${job.id}`;
-    const pct = Math.round(100 * (job.progress || 0));
+    // Before training reports, a long phase (demonstrations, behaviour cloning) shows its own
+    // progress in the bar.
+    const phase = job.state === 'running' ? phaseOf(job) : null;
+    const pct = Math.round(100 * (phase ? phase.done / Math.max(phase.total, 1) : (job.progress || 0)));
     let result = job.error ? el('span', { class: 'bad', title: job.error }, 'error') : '';
     if (job.result && !isTrain && asObject(job.result).success_rate !== undefined) {
       result = `success ${fmtNum(asObject(job.result).success_rate)}`;
@@ -105,8 +108,8 @@ export async function renderJobs(main) {
     return el('tr', { 'data-job': job.id, 'data-state': job.state },
       el('td', {}, check), el('td', {}, link), el('td', {}, job.kind), el('td', {}, badge(job.state)),
       el('td', {}, job.algorithm), el('td', { class: 'tasks' }, tasksOf(job)),
-      el('td', {}, el('div', { class: 'progress', title: `${job.steps} steps` },
-        el('div', { class: 'bar', style: `width:${pct}%` }), el('span', {}, `${pct}%`))),
+      el('td', {}, el('div', { class: phase ? 'progress phase' : 'progress', title: phase ? phaseText(phase) : `${job.steps} steps` },
+        el('div', { class: 'bar', style: `width:${pct}%` }), el('span', {}, phase ? `${phase.name} ${pct}%` : `${pct}%`))),
       el('td', {}, job.steps_per_s ? Math.round(job.steps_per_s) : ''),
       el('td', {}, workerNames[job.worker_id] || job.worker_id || ''),
       el('td', {}, fmtTime(job.started_at)), el('td', {}, duration(job)),

@@ -2,7 +2,7 @@
 // evaluate), its evaluations and its recent episodes.
 import {
   ApiError, asObject, badge, chartControls, chartSettings, drawChart, duration, el, errorBox, fmtNum,
-  fmtTime, getJson, notFound, onChange, send, tasksOf,
+  fmtBytes, fmtTime, getJson, notFound, onChange, phaseOf, phaseText, send, tasksOf,
 } from './api.js';
 
 const METRICS = ['success', 'episode_length', 'return', 'reward_split', 'stages', 'entropy', 'value_loss', 'learning_rate'];
@@ -63,18 +63,7 @@ export async function renderRun(main, idText) {
     }
   }
 
-  async function evaluate(checkpoint) {
-    const text = episodesInput.value.trim();
-    const count = /^\d+$/.test(text) ? Number(text) : text;
-    try {
-      const body = { kind: 'eval', checkpoint_id: checkpoint.id, episodes: count };
-      if (meanInput.checked) body.deterministic = true;
-      const job = await send('POST', '/api/v1/jobs', body);
-      message.replaceChildren(el('div', { class: 'ok' }, `Evaluation job ${job.id} queued for checkpoint ${checkpoint.id}.`));
-    } catch (err) {
-      message.replaceChildren(errorBox(err.field ? new Error(`${err.field}: ${err.message}`) : err));
-    }
-  }
+  const evaluate = (checkpoint) => queueEvaluation(checkpoint, episodesInput, meanInput, message);
 
   function show(d) {
     const run = d.run;
@@ -87,6 +76,7 @@ export async function renderRun(main, idText) {
       el('h1', {}, `Run #${run.id} `, el('small', {}, run.algorithm), ' ', badge(run.state)),
       el('dl', { class: 'facts' },
         ...fact('tasks', tasksOf(run)), ...fact('topology', spec.topology || 'task'), ...fact('seed', spec.seed ?? 0),
+        ...(run.state === 'running' && phaseOf(run) ? fact('phase', el('span', { id: 'phase' }, phaseText(phaseOf(run)))) : []),
         ...fact('steps', `${run.steps.toLocaleString()} of ${(spec.steps || 0).toLocaleString()} (${Math.round(100 * run.progress)}%)`),
         ...fact('steps/s', run.steps_per_s ? Math.round(run.steps_per_s) : ''),
         ...fact('success (last 100)', last ? fmtNum(last.success_rate_last_100) : ''),
@@ -148,11 +138,27 @@ function recordingInfo(run, rec) {
     el('code', { class: 'command' }, `rerun ${url}`))];
 }
 
+/** Queues an evaluation of `checkpoint` with the episodes and mean-action inputs' values;
+ * says so (or shows the API's error) in `message`. */
+export async function queueEvaluation(checkpoint, episodesInput, meanInput, message) {
+  const text = episodesInput.value.trim();
+  const count = /^\d+$/.test(text) ? Number(text) : text;
+  try {
+    const body = { kind: 'eval', checkpoint_id: checkpoint.id, episodes: count };
+    if (meanInput.checked) body.deterministic = true;
+    const job = await send('POST', '/api/v1/jobs', body);
+    message.replaceChildren(el('div', { class: 'ok' }, `Evaluation job ${job.id} queued for checkpoint ${checkpoint.id}.`));
+  } catch (err) {
+    message.replaceChildren(errorBox(err.field ? new Error(`${err.field}: ${err.message}`) : err));
+  }
+}
+
 function fact(name, value) {
   return [el('dt', {}, name), el('dd', {}, value)];
 }
 
-function evaluationTable(evaluations) {
+/** The evaluations of checkpoints as Table I rows: overall and per-objective success. */
+export function evaluationTable(evaluations) {
   if (!evaluations.length) return el('p', { class: 'muted' }, 'No evaluation yet: press Evaluate on a checkpoint.');
   const reports = evaluations.map((e) => (e.result && e.result.per_objective ? e.result : null));
   const objectives = [...new Set(reports.flatMap((r) => (r ? Object.keys(r.per_objective) : [])))].sort();
@@ -179,16 +185,4 @@ function episodeList(episodes) {
   return el('table', { id: 'episodes' },
     el('thead', {}, el('tr', {}, ['task', 'success', 'length', 'return', 'stage transitions (event, reward)'].map((h) => el('th', {}, h)))),
     el('tbody', {}, rows));
-}
-
-/** Bytes as KiB, MiB or GiB. */
-function fmtBytes(bytes) {
-  const units = ['bytes', 'KiB', 'MiB', 'GiB'];
-  let value = bytes;
-  let unit = 0;
-  while (value >= 1024 && unit < units.length - 1) {
-    value /= 1024;
-    unit += 1;
-  }
-  return unit === 0 ? `${value} bytes` : `${value.toFixed(1)} ${units[unit]}`;
 }

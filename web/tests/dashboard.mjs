@@ -238,6 +238,35 @@ check('the topology page shows picks per task and a heat map of forced topologie
   await shot('topology');
 });
 
+check('the models page lists the shipped model, refuses a file that is no checkpoint and evaluates a model', async () => {
+  await page.goto(`${base}/models`);
+  await page.waitForSelector('#models tr[data-checkpoint]');
+  assert.match(await page.textContent('#models tr[data-checkpoint]'), /crm-ppo/);
+  const id = Number(await page.getAttribute('#models tr[data-checkpoint]', 'data-checkpoint'));
+  await page.setInputFiles('#model-file', { name: 'notes.safetensors', mimeType: 'application/octet-stream', buffer: Buffer.from('hello') });
+  await page.click('#upload-model');
+  await page.waitForSelector('.message .error');
+  assert.match(await page.textContent('.message'), /body: not a safetensors file/);
+  // The shipped file itself is the same model, not a second one.
+  await page.setInputFiles('#model-file', process.env.CRM_MODEL);
+  await page.click('#upload-model');
+  await page.waitForSelector('#uploaded');
+  assert.match(await page.textContent('#uploaded'), new RegExp(`model ${id} `));
+  assert.equal(await page.$$eval('#models tr[data-checkpoint]', (trs) => trs.length), 1);
+  await page.fill('input[name="eval-episodes"]', '5');
+  await page.click('#models tr[data-checkpoint] button:has-text("Evaluate")');
+  await page.waitForSelector('.message .ok:has-text("Evaluation job")');
+  const job = Number((await page.textContent('.message .ok')).match(/job (\d+)/)[1]);
+  const queued = await api(`/api/v1/jobs/${job}`);
+  assert.equal(queued.checkpoint_id, id);
+  assert.equal(queued.spec.episodes, 5);
+  // No worker runs now: cancel it; the page's evaluations follow live.
+  const cancelled = await fetch(`${base}/api/v1/jobs/${job}/cancel`, { method: 'POST' });
+  assert.equal(cancelled.status, 200);
+  await page.waitForSelector('#evaluations .badge.cancelled');
+  await shot('models');
+});
+
 // Last: it removes run C (the other checks use it).
 check('a finished run shows its disk use and can be deleted from its page', async () => {
   const before = await api(`/api/v1/runs/${runC}`);

@@ -23,8 +23,9 @@ pub struct PpoConfig {
     /// Minibatch size. Paper V-B-2: "a batch size of 64".
     pub minibatch_size: usize,
     /// Surrogate clip range epsilon. Not given in the paper; 0.2, stable-baselines3's default,
-    /// which the authors' code used.
-    pub clip_coef: f32,
+    /// which the authors' code used. (`f64` so a tiny JSON value is checked as given; the
+    /// learner uses it as `f32`.)
+    pub clip_coef: f64,
     /// Entropy bonus coefficient. Not given in the paper; 0.0, stable-baselines3's default.
     pub ent_coef: f32,
     /// Value loss coefficient. Not given in the paper; 0.5, stable-baselines3's default.
@@ -32,7 +33,7 @@ pub struct PpoConfig {
     /// Gradient norm clip, applied to the actor's and the critic's gradients separately (so
     /// the value loss cannot shrink the policy's step). Not given in the paper; 0.5,
     /// stable-baselines3's and CleanRL's value.
-    pub max_grad_norm: f32,
+    pub max_grad_norm: f64,
     /// Passes over each rollout. Not given in the paper; 10, stable-baselines3's default.
     pub update_epochs: usize,
     /// Environment steps per rollout (over all environments). stable-baselines3's 2048.
@@ -106,9 +107,7 @@ impl PpoConfig {
         if !(0.0..=1.0).contains(&self.gae_lambda) {
             return bad("gae_lambda", "must be in [0, 1]");
         }
-        if self.minibatch_size == 0 {
-            return bad("minibatch_size", "must be at least 1");
-        }
+        within("minibatch_size", self.minibatch_size, 1, MAX_BATCH)?;
         if !(self.clip_coef > 0.0 && self.clip_coef < 1.0) {
             return bad("clip_coef", "must be in (0, 1)");
         }
@@ -118,22 +117,36 @@ impl PpoConfig {
         if self.max_grad_norm.is_nan() || self.max_grad_norm <= 0.0 {
             return bad("max_grad_norm", "must be positive");
         }
-        if !(self.target_kl.is_finite() && self.target_kl >= 0.0) {
-            return bad(
-                "target_kl",
-                "must be a non-negative number (0 turns the guard off)",
-            );
+        if !(0.0..=1000.0).contains(&self.target_kl) {
+            return bad("target_kl", "must be in [0, 1000] (0 turns the guard off)");
         }
         if !(self.init_log_std.is_finite() && (-5.0..=2.0).contains(&self.init_log_std)) {
             return bad("init_log_std", "must be in [-5, 2]");
         }
-        if self.update_epochs == 0 || self.rollout_steps == 0 {
-            return bad(
-                "update_epochs",
-                "epochs and rollout steps must be at least 1",
-            );
-        }
+        within("update_epochs", self.update_epochs, 1, MAX_EPOCHS)?;
+        within("rollout_steps", self.rollout_steps, 1, MAX_BATCH)
+    }
+}
+
+/// Most rows in one batch: PPO's rollout and minibatch, SAC's batch and rollout (the bounds
+/// keep a job's memory within a worker's; the paper's and anchors' values are far below).
+pub const MAX_BATCH: usize = 1 << 20;
+/// Most passes over one rollout.
+pub const MAX_EPOCHS: usize = 1000;
+/// Most hidden layers, and the widest one.
+pub const MAX_LAYERS: usize = 8;
+pub const MAX_WIDTH: usize = 4096;
+/// Longest early-stop window, in episodes.
+pub const MAX_WINDOW: usize = 10_000_000;
+/// Largest SAC replay buffer, in transitions (SB3's default is 1,000,000).
+pub const MAX_BUFFER: usize = 10_000_000;
+
+/// `value` in `[min, max]`, or an error naming `field` and the range.
+fn within(field: &'static str, value: usize, min: usize, max: usize) -> Result<(), ConfigError> {
+    if (min..=max).contains(&value) {
         Ok(())
+    } else {
+        bad(field, &format!("must be between {min} and {max}"))
     }
 }
 
@@ -160,16 +173,19 @@ fn check_common(c: &Common<'_>) -> Result<(), ConfigError> {
     if !(0.0..=1.0).contains(&c.gamma) {
         return bad("gamma", "must be in [0, 1]");
     }
-    if c.hidden.is_empty() || c.hidden.contains(&0) {
-        return bad("hidden", "needs at least one layer and no zero width");
-    }
-    if !(0.0..=1.0).contains(&c.early_stop_success) || c.early_stop_window == 0 {
+    if c.hidden.is_empty()
+        || c.hidden.len() > MAX_LAYERS
+        || c.hidden.iter().any(|w| !(1..=MAX_WIDTH).contains(w))
+    {
         return bad(
-            "early_stop_success",
-            "must be in [0, 1] with a window of at least 1",
+            "hidden",
+            &format!("1 to {MAX_LAYERS} layers, each 1 to {MAX_WIDTH} wide"),
         );
     }
-    Ok(())
+    if !(0.0..=1.0).contains(&c.early_stop_success) {
+        return bad("early_stop_success", "must be in [0, 1]");
+    }
+    within("early_stop_window", c.early_stop_window, 1, MAX_WINDOW)
 }
 
 /// Knobs of SAC inside the CRM (the paper's CRM-SAC baseline, section V-A). The paper gives
@@ -183,7 +199,7 @@ pub struct SacConfig {
     /// Discount. Paper V-B-2 (as for PPO): 0.99.
     pub gamma: f32,
     /// Polyak factor of the target critics. sb3: 0.005.
-    pub tau: f32,
+    pub tau: f64,
     /// Minibatch size. sb3: 256.
     pub batch_size: usize,
     /// Replay buffer capacity in transitions. sb3: 1,000,000.
@@ -192,7 +208,7 @@ pub struct SacConfig {
     /// the grasping episodes are long.
     pub learning_starts: usize,
     /// Gradient steps per environment step. sb3: 1.
-    pub updates_per_step: f32,
+    pub updates_per_step: f64,
     /// Environment steps per iteration (between progress reports).
     pub rollout_steps: usize,
     /// Hidden layer widths of the actor and each critic. sb3: [256, 256].
@@ -241,17 +257,15 @@ impl SacConfig {
         if !(self.tau > 0.0 && self.tau <= 1.0) {
             return bad("tau", "must be in (0, 1]");
         }
-        if self.batch_size == 0 || self.buffer_size < self.batch_size {
-            return bad("batch_size", "must be at least 1 and at most buffer_size");
+        // A batch larger than the buffer's content takes all of it (`Sac::update`).
+        within("batch_size", self.batch_size, 1, MAX_BATCH)?;
+        within("buffer_size", self.buffer_size, 1, MAX_BUFFER)?;
+        if !(self.updates_per_step > 0.0 && self.updates_per_step <= 1000.0) {
+            return bad("updates_per_step", "must be in (0, 1000]");
         }
-        if !(self.updates_per_step.is_finite() && self.updates_per_step > 0.0) {
-            return bad("updates_per_step", "must be positive");
-        }
-        if self.rollout_steps == 0 {
-            return bad("rollout_steps", "must be at least 1");
-        }
-        if !self.target_entropy_per_dim.is_finite() {
-            return bad("target_entropy_per_dim", "must be finite");
+        within("rollout_steps", self.rollout_steps, 1, MAX_BATCH)?;
+        if !(-100.0..=100.0).contains(&self.target_entropy_per_dim) {
+            return bad("target_entropy_per_dim", "must be in [-100, 100]");
         }
         Ok(())
     }
@@ -313,9 +327,34 @@ mod tests {
                 },
                 "batch_size",
             ),
+            (
+                SacConfig {
+                    hidden: vec![64; 9],
+                    ..SacConfig::default()
+                },
+                "hidden",
+            ),
+            (
+                SacConfig {
+                    buffer_size: MAX_BUFFER + 1,
+                    ..SacConfig::default()
+                },
+                "buffer_size",
+            ),
         ] {
             assert_eq!(config.validate().expect_err(field).field, field);
         }
         assert!(SacConfig::default().validate().is_ok());
+        // A batch larger than the buffer is fine: it takes the whole buffer.
+        let small = SacConfig {
+            buffer_size: 10,
+            ..SacConfig::default()
+        };
+        assert!(small.validate().is_ok());
+        let wide = PpoConfig {
+            hidden: vec![MAX_WIDTH + 1],
+            ..PpoConfig::default()
+        };
+        assert_eq!(wide.validate().expect_err("too wide").field, "hidden");
     }
 }

@@ -5,12 +5,14 @@
 //! workers and the learners all link it. The gRPC protocol is in `crm-proto`.
 
 pub mod catalog;
+pub mod checkpoint;
 pub mod config;
 pub mod imitation;
 pub mod jobs;
 pub mod record;
 
 pub use catalog::Catalog;
+pub use checkpoint::{CheckpointError, CheckpointInfo};
 pub use config::{ConfigError, PpoConfig, SacConfig};
 pub use imitation::ImitationSpec;
 pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, ObjectiveMode, Row, TrainSpec};

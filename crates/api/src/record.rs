@@ -86,7 +86,10 @@ pub fn viewer_address(url: &str) -> Result<String, String> {
     let (host, port) = host_port
         .rsplit_once(':')
         .ok_or_else(|| format!("{url:?} names no port"))?;
-    if host.is_empty() || port.parse::<u16>().map_or(true, |p| p == 0) {
+    // The port as the OpenAPI document's pattern has it: 1 to 65535, digits only, no
+    // leading zero.
+    let digits = port.bytes().all(|b| b.is_ascii_digit()) && !port.starts_with('0');
+    if host.is_empty() || !digits || port.parse::<u16>().is_err() {
         return Err(format!("{url:?}: bad host or port"));
     }
     Ok(host_port.to_string())

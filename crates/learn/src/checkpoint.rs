@@ -18,7 +18,7 @@ const NORM_VAR: &str = "obs_norm.var";
 const NORM_COUNT: &str = "obs_norm.count";
 
 /// Format tag in every header.
-pub const FORMAT: &str = "crm-grasp-checkpoint/1";
+pub const FORMAT: &str = crm_api::checkpoint::FORMAT;
 const HEADER_KEY: &str = "crm_grasp";
 
 /// What a checkpoint says about itself.

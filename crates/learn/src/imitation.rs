@@ -39,6 +39,18 @@ impl Ppo {
     /// `epochs` passes of minibatch regression of the policy mean onto `demos` with the
     /// learner's optimizer at `learning_rate`; returns the last epoch's mean loss.
     pub fn imitate(&mut self, demos: &Demos, epochs: usize, learning_rate: f64) -> Result<f32> {
+        self.imitate_with(demos, epochs, learning_rate, |_, _| true)
+    }
+
+    /// [`Self::imitate`], calling `on_epoch(epochs done, mean loss)` after each epoch; it
+    /// stops early (with the loss so far) when `on_epoch` answers `false`.
+    pub fn imitate_with(
+        &mut self,
+        demos: &Demos,
+        epochs: usize,
+        learning_rate: f64,
+        mut on_epoch: impl FnMut(usize, f32) -> bool,
+    ) -> Result<f32> {
         let n = demos.len();
         let width = self.net.layout().actions;
         if demos.stages.len() != n || demos.actions.len() != n || demos.masks.len() != n {
@@ -60,7 +72,7 @@ impl Ppo {
         let saved_rate = self.optimizer_mut().learning_rate;
         self.optimizer_mut().learning_rate = learning_rate;
         let mut last = 0.0;
-        for _ in 0..epochs {
+        for epoch in 0..epochs {
             let order = self.noise_mut().shuffle(n);
             let (mut total, mut batches) = (0.0f32, 0usize);
             for chunk in order.chunks(self.config.minibatch_size.max(1)) {
@@ -76,13 +88,16 @@ impl Ppo {
                 let live = masks.sum_all()?.to_scalar::<f32>()?.max(1.0);
                 let loss = (((mean - targets)?.sqr()? * masks)?.sum_all()? / f64::from(live))?;
                 let grads = loss.backward()?;
-                let max_norm = self.config.max_grad_norm;
+                let max_norm = self.config.max_grad_norm as f32;
                 let params = self.net.params().to_vec();
                 self.optimizer_mut().step(&params, &grads, max_norm)?;
                 total += loss.to_scalar::<f32>()?;
                 batches += 1;
             }
             last = total / batches.max(1) as f32;
+            if !on_epoch(epoch + 1, last) {
+                break;
+            }
         }
         self.optimizer_mut().learning_rate = saved_rate;
         Ok(last)

@@ -258,7 +258,7 @@ impl Ppo {
         let log_probs = self.net.log_prob(&self.net.mean(input)?, actions, masks)?;
         let log_ratio = (&log_probs - old_log_probs)?;
         let ratio = log_ratio.exp()?;
-        let eps = f64::from(self.config.clip_coef);
+        let eps = f64::from(self.config.clip_coef as f32);
         let unclipped = (&ratio * advantages)?;
         let clipped = (ratio.clamp(1.0 - eps, 1.0 + eps)? * advantages)?;
         let policy_loss = unclipped.minimum(&clipped)?.mean_all()?.neg()?;
@@ -270,7 +270,7 @@ impl Ppo {
         let stepped = Instant::now();
         stats.timing.forward_backward += (stepped - started).as_secs_f64();
         self.optimizer
-            .step(self.net.params(), &grads, self.config.max_grad_norm)?;
+            .step(self.net.params(), &grads, self.config.max_grad_norm as f32)?;
         let read = Instant::now();
         stats.timing.optimizer += (read - stepped).as_secs_f64();
 
@@ -281,7 +281,7 @@ impl Ppo {
         let approx_kl = log_ratio.iter().map(|&l| (l.exp() - 1.0) - l).sum::<f32>() / count;
         let clipfrac = log_ratio
             .iter()
-            .filter(|&&l| (l.exp() - 1.0).abs() > self.config.clip_coef)
+            .filter(|&&l| (l.exp() - 1.0).abs() > self.config.clip_coef as f32)
             .count() as f32
             / count;
         stats.policy_loss += policy_loss.to_scalar::<f32>()?;

@@ -299,7 +299,7 @@ impl Sac {
             stats.alpha = self.nets.alpha()?;
             return Ok(stats);
         }
-        let steps = ((env_steps as f32) * self.config.updates_per_step).ceil() as usize;
+        let steps = ((env_steps as f32) * self.config.updates_per_step as f32).ceil() as usize;
         for _ in 0..steps {
             let s = self.step()?;
             stats.critic_loss += s.critic_loss / steps as f32;
@@ -373,7 +373,7 @@ impl Sac {
         let alpha_loss =
             (self.nets.log_alpha.as_tensor().broadcast_mul(&gap)? * -1.0)?.mean_all()?;
         self.alpha_opt.backward_step(&alpha_loss)?;
-        self.nets.polyak(f64::from(self.config.tau))?;
+        self.nets.polyak(f64::from(self.config.tau as f32))?;
         Ok(SacStats {
             critic_loss: critic_loss.to_scalar::<f32>()?,
             actor_loss: actor_loss.to_scalar::<f32>()?,

@@ -109,7 +109,7 @@ async fn evaluations_of(
 ) -> Result<Vec<(Job, EvalReport)>, ApiError> {
     let ids: Vec<i64> = state
         .store
-        .checkpoints(Some(run.id))
+        .checkpoints(Some(run.id), false)
         .await
         .map_err(|e| ApiError::store("checkpoint", e))?
         .iter()
@@ -393,6 +393,7 @@ mod tests {
             worker_id: None,
             attempts: 1,
             lease_expires_at: None,
+            phase: None,
             progress: 1.0,
             steps: 0,
             steps_per_s: None,

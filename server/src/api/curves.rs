@@ -151,15 +151,23 @@ impl Axis {
 }
 
 /// Parses `runs=1,2,3`: at most 12 positive ids, each an existing training run.
+/// Most runs one chart or comparison takes.
+pub const MAX_RUNS: usize = 12;
+
+/// The runs of `runs=1,2,3` (1 to [`MAX_RUNS`] positive ids, comma-separated, no spaces or
+/// leading zeros; a repeated id counts once), each a training run.
 pub async fn runs_of(state: &AppState, text: Option<&String>) -> Result<Vec<Job>, ApiError> {
     let text = text.ok_or_else(|| ApiError::invalid("runs", "give run ids, as runs=1,2"))?;
+    let parts: Vec<&str> = text.split(',').collect();
+    if parts.len() > MAX_RUNS {
+        return Err(ApiError::invalid(
+            "runs",
+            format!("give between 1 and {MAX_RUNS} run ids"),
+        ));
+    }
     let mut jobs = Vec::new();
-    for part in text.split(',').filter(|p| !p.trim().is_empty()) {
-        let id = part
-            .trim()
-            .parse::<i64>()
-            .ok()
-            .filter(|id| *id > 0)
+    for part in parts {
+        let id = run_id(part)
             .ok_or_else(|| ApiError::invalid("runs", format!("{part:?} is not a run id")))?;
         let job = state
             .store
@@ -176,10 +184,15 @@ pub async fn runs_of(state: &AppState, text: Option<&String>) -> Result<Vec<Job>
             jobs.push(job);
         }
     }
-    if jobs.is_empty() || jobs.len() > 12 {
-        return Err(ApiError::invalid("runs", "give between 1 and 12 run ids"));
-    }
     Ok(jobs)
+}
+
+/// A run id as the OpenAPI document's pattern has it: 1 to 18 digits, no leading zero.
+fn run_id(text: &str) -> Option<i64> {
+    let digits = text.len() <= 18 && text.bytes().all(|b| b.is_ascii_digit());
+    (digits && !text.starts_with('0') && !text.is_empty())
+        .then(|| text.parse().ok())
+        .flatten()
 }
 
 /// A run's configuration without its seed (and its recording, which changes nothing it
@@ -208,6 +221,23 @@ fn number(
         .ok_or_else(|| ApiError::invalid(key, format!("a number from {} to {}", range.0, range.1)))
 }
 
+fn integer(
+    query: &HashMap<String, String>,
+    key: &str,
+    default: u32,
+    range: (u32, u32),
+) -> Result<u32, ApiError> {
+    let Some(text) = query.get(key) else {
+        return Ok(default);
+    };
+    text.parse::<u32>()
+        .ok()
+        .filter(|v| (range.0..=range.1).contains(v))
+        .ok_or_else(|| {
+            ApiError::invalid(key, format!("an integer from {} to {}", range.0, range.1))
+        })
+}
+
 pub async fn chart(
     State(state): State<Arc<AppState>>,
     Query(query): Query<HashMap<String, String>>,
@@ -232,8 +262,8 @@ pub async fn chart(
         "seeds" => true,
         _ => return Err(ApiError::invalid("group", "none or seeds")),
     };
-    let width = number(&query, "width", 640.0, (200.0, 2000.0))? as u32;
-    let height = number(&query, "height", 320.0, (150.0, 1500.0))? as u32;
+    let width = integer(&query, "width", 640, (200, 2000))?;
+    let height = integer(&query, "height", 320, (150, 1500))?;
     let jobs = runs_of(&state, query.get("runs")).await?;
 
     let mut curves = Vec::new();

@@ -68,7 +68,7 @@ impl ApiError {
             StoreError::NotFound => Self::not_found("id", format!("no such {what}")),
             StoreError::Conflict(state) => Self::conflict(format!("the {what} is {state}")),
             StoreError::KeyReused(job) => Self {
-                status: StatusCode::UNPROCESSABLE_ENTITY,
+                status: StatusCode::CONFLICT,
                 code: "idempotency_key_reused",
                 message: format!(
                     "this Idempotency-Key was used for another request, which created job {job}; use a new key for a new job"

@@ -137,7 +137,7 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
             check_task(&spec.task, &spec.tasks, &spec.topology)?;
             check_record(&spec.record)?;
             let checkpoint = state.store.checkpoint(checkpoint_id).await.map_err(|_| {
-                ApiError::invalid("checkpoint_id", format!("no checkpoint {checkpoint_id}"))
+                ApiError::not_found("checkpoint_id", format!("no checkpoint {checkpoint_id}"))
             })?;
             Ok(Submission {
                 kind: "eval",
@@ -211,7 +211,7 @@ fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
 /// Submits a job. With an `Idempotency-Key` header, a retry with the same key and the same
 /// request (compared after validation, so defaults written out or left out are the same
 /// request) answers with the job the first submit created, in its current state, and the
-/// header `Idempotent-Replayed: true`; the same key with another request is 422.
+/// header `Idempotent-Replayed: true`; the same key with another request is 409.
 pub async fn create(
     State(state): State<Arc<AppState>>,
     headers: HeaderMap,

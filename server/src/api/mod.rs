@@ -3,6 +3,7 @@
 //! `/api/v1/openapi.json`; for the dashboard, SVG charts, comparisons, the topology table and
 //! server-sent events. Errors are JSON `{"error": {"code", "message", "field"}}`.
 
+mod checkpoints;
 mod compare;
 mod curves;
 mod error;
@@ -43,9 +44,16 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/runs/{id}/metrics", get(resources::run_metrics))
         .route("/evaluations", get(resources::evaluations))
         .route("/evaluations/{id}", get(resources::evaluation))
-        .route("/checkpoints", get(resources::checkpoints))
-        .route("/checkpoints/{id}", get(resources::checkpoint))
-        .route("/checkpoints/{id}/download", get(resources::download))
+        .route(
+            "/checkpoints",
+            get(checkpoints::list).post(checkpoints::upload).layer(
+                axum::extract::DefaultBodyLimit::max(
+                    usize::try_from(state.config.max_checkpoint_bytes).unwrap_or(usize::MAX),
+                ),
+            ),
+        )
+        .route("/checkpoints/{id}", get(checkpoints::get))
+        .route("/checkpoints/{id}/download", get(checkpoints::download))
         .route("/workers", get(resources::workers))
         .route("/tasks", get(resources::tasks))
         .route("/charts", get(curves::chart))

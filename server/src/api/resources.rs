@@ -1,5 +1,5 @@
 //! Read-only resources: runs (training jobs with their metric series), evaluations (with
-//! per-objective results), checkpoints (with download), workers and the task catalog.
+//! per-objective results), workers and the task catalog. Checkpoints are in `checkpoints.rs`.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -66,7 +66,7 @@ pub async fn run(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> 
     let store = &state.store;
     let err = |e| ApiError::store("run", e);
     let metrics = store.metrics(job.id).await.map_err(err)?;
-    let checkpoints = store.checkpoints(Some(job.id)).await.map_err(err)?;
+    let checkpoints = store.checkpoints(Some(job.id), false).await.map_err(err)?;
     let ids: Vec<i64> = checkpoints.iter().map(|c| c.id).collect();
     let evaluations: Vec<Job> = store
         .jobs(&JobFilter {
@@ -202,68 +202,6 @@ pub async fn evaluation(State(state): State<Arc<AppState>>, Path(id): Path<Strin
     value["recording"] = recording;
     value["episodes"] = json!(episodes);
     Ok(Json(value).into_response())
-}
-
-pub async fn checkpoints(
-    State(state): State<Arc<AppState>>,
-    Query(query): Query<HashMap<String, String>>,
-) -> Res {
-    let mut job = None;
-    for (key, value) in &query {
-        match key.as_str() {
-            "job_id" => {
-                job = Some(
-                    parse_id(value)
-                        .map_err(|_| ApiError::invalid("job_id", "a positive integer"))?,
-                )
-            }
-            other => return Err(ApiError::invalid(other, "unknown query parameter")),
-        }
-    }
-    let checkpoints = state
-        .store
-        .checkpoints(job)
-        .await
-        .map_err(|e| ApiError::store("checkpoint", e))?;
-    Ok(Json(json!({ "checkpoints": checkpoints })).into_response())
-}
-
-pub async fn checkpoint(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
-    let row = state
-        .store
-        .checkpoint(parse_id(&id)?)
-        .await
-        .map_err(|e| ApiError::store("checkpoint", e))?;
-    Ok(Json(row).into_response())
-}
-
-pub async fn download(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
-    let row = state
-        .store
-        .checkpoint(parse_id(&id)?)
-        .await
-        .map_err(|e| ApiError::store("checkpoint", e))?;
-    // Checkpoints are small (about a megabyte): read whole.
-    let bytes = tokio::fs::read(state.store.checkpoint_path(&row))
-        .await
-        .map_err(ApiError::internal)?;
-    let body = Body::from(bytes);
-    let name = format!(
-        "{}-job{}-{}.safetensors",
-        row.algorithm, row.job_id, row.steps
-    );
-    Ok((
-        [
-            (header::CONTENT_TYPE, "application/octet-stream".to_string()),
-            (header::CONTENT_LENGTH, row.size.to_string()),
-            (
-                header::CONTENT_DISPOSITION,
-                format!("attachment; filename=\"{name}\""),
-            ),
-        ],
-        body,
-    )
-        .into_response())
 }
 
 pub async fn workers(State(state): State<Arc<AppState>>) -> Res {

@@ -8,13 +8,14 @@ use std::sync::Arc;
 
 use crm_proto::pb::coordinator_server::{Coordinator, CoordinatorServer};
 use crm_proto::pb::{self, checkpoint_chunk, progress};
+use sha2::{Digest, Sha256};
 use tokio::io::AsyncWriteExt;
 use tokio_stream::Stream;
 use tonic::service::interceptor::InterceptedService;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::AppState;
-use crate::store::StoreError;
+use crate::store::{NewCheckpoint, StoreError};
 
 mod recording;
 
@@ -226,6 +227,17 @@ impl Coordinator for CoordinatorService {
                         .await
                         .map_err(status)?;
                 }
+                Some(progress::Body::Phase(phase)) => {
+                    if phase.name.is_empty() || phase.name.len() > 64 || phase.done > phase.total {
+                        return Err(Status::invalid_argument(
+                            "phase: a name of 1 to 64 bytes and done <= total",
+                        ));
+                    }
+                    store
+                        .set_phase(key.1, &phase.name, phase.done, phase.total)
+                        .await
+                        .map_err(status)?;
+                }
                 None => return Err(Status::invalid_argument("progress: empty body")),
             }
             accepted += 1;
@@ -269,6 +281,10 @@ impl Coordinator for CoordinatorService {
             .await
             .map_err(|e| Status::internal(e.to_string()))?;
         let mut written = 0u64;
+        // The file's hash, and its first bytes up to the end of the safetensors header.
+        let mut hasher = Sha256::new();
+        let mut prefix = Vec::new();
+        let mut want = 8u64;
         let result: Result<(), Status> = async {
             while let Some(chunk) = stream.message().await? {
                 let Some(checkpoint_chunk::Body::Data(data)) = chunk.body else {
@@ -278,6 +294,16 @@ impl Coordinator for CoordinatorService {
                 if written > meta.size {
                     return Err(Status::invalid_argument("more bytes than meta.size"));
                 }
+                hasher.update(&data);
+                let mut offset = 0;
+                while (prefix.len() as u64) < want && offset < data.len() {
+                    let take = ((want - prefix.len() as u64) as usize).min(data.len() - offset);
+                    prefix.extend_from_slice(&data[offset..offset + take]);
+                    offset += take;
+                    if prefix.len() >= 8 {
+                        want = crm_api::checkpoint::header_len(&prefix).unwrap_or(8);
+                    }
+                }
                 file.write_all(&data)
                     .await
                     .map_err(|e| Status::internal(e.to_string()))?;
@@ -286,6 +312,17 @@ impl Coordinator for CoordinatorService {
                 return Err(Status::invalid_argument(format!(
                     "got {written} bytes, meta.size says {}",
                     meta.size
+                )));
+            }
+            // Checked as an uploaded checkpoint is: a file its evaluations could not load
+            // is refused now, not when a worker tries.
+            let info = crm_api::checkpoint::inspect(&prefix, written)
+                .map_err(|e| Status::invalid_argument(format!("checkpoint: {e}")))?;
+            if info.algorithm.name() != meta.algorithm {
+                return Err(Status::invalid_argument(format!(
+                    "meta.algorithm: {:?}, the checkpoint says {:?}",
+                    meta.algorithm,
+                    info.algorithm.name()
                 )));
             }
             file.sync_all()
@@ -300,16 +337,19 @@ impl Coordinator for CoordinatorService {
             tokio::fs::remove_file(&partial).await.ok();
             return Err(err);
         }
+        let sha256 = crate::uploads::hex(&hasher.finalize());
         let row = self
             .state
             .store
-            .add_checkpoint(
-                meta.job_id,
-                &meta.algorithm,
-                meta.steps as i64,
-                written as i64,
-                &name,
-            )
+            .add_checkpoint(&NewCheckpoint {
+                job: Some(meta.job_id),
+                algorithm: &meta.algorithm,
+                steps: meta.steps as i64,
+                size: written as i64,
+                file: &name,
+                sha256: &sha256,
+                name: None,
+            })
             .await
             .map_err(status)?;
         tracing::info!(
@@ -361,7 +401,7 @@ impl Coordinator for CoordinatorService {
             .map_err(|e| Status::internal(e.to_string()))?;
         let meta = pb::CheckpointChunk {
             body: Some(checkpoint_chunk::Body::Meta(pb::CheckpointMeta {
-                job_id: row.job_id,
+                job_id: row.job_id.unwrap_or(0),
                 worker_id: String::new(),
                 steps: row.steps as u64,
                 algorithm: row.algorithm,

@@ -8,10 +8,12 @@ use std::time::Duration;
 
 use serde::Serialize;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
-use sqlx::{FromRow, SqlitePool};
+use sqlx::{ConnectOptions, Connection, FromRow, SqlitePool};
 
+mod checkpoints;
 mod recordings;
 
+pub use checkpoints::{CheckpointRow, NewCheckpoint};
 pub use recordings::RecordingRow;
 
 /// Milliseconds since the Unix epoch.
@@ -45,6 +47,9 @@ pub struct Job {
     pub created_at: i64,
     pub started_at: Option<i64>,
     pub finished_at: Option<i64>,
+    /// Before training reports: the phase (`{"name", "done", "total"}`), else `None`.
+    #[serde(serialize_with = "as_json_opt")]
+    pub phase: Option<String>,
 }
 
 /// Stored JSON text goes out as JSON, not as a string.
@@ -69,18 +74,6 @@ pub struct Worker {
     pub version: String,
     pub registered_at: i64,
     pub last_heartbeat: i64,
-}
-
-#[derive(Clone, Debug, Serialize, FromRow)]
-pub struct CheckpointRow {
-    pub id: i64,
-    pub job_id: i64,
-    pub algorithm: String,
-    pub steps: i64,
-    pub size: i64,
-    #[serde(skip)]
-    pub file: String,
-    pub created_at: i64,
 }
 
 #[derive(Clone, Debug, Serialize, FromRow)]
@@ -137,9 +130,11 @@ pub struct Store {
     pool: SqlitePool,
     checkpoints: PathBuf,
     recordings: PathBuf,
+    /// Whether `open` created the database (a new data folder).
+    created: bool,
 }
 
-const JOB_COLUMNS: &str = "id, kind, state, algorithm, task, spec, checkpoint_id, rerun_of, worker_id, attempts, lease_expires_at, progress, steps, steps_per_s, result, error, created_at, started_at, finished_at";
+const JOB_COLUMNS: &str = "id, kind, state, algorithm, task, spec, checkpoint_id, rerun_of, worker_id, attempts, lease_expires_at, progress, steps, steps_per_s, result, error, created_at, started_at, finished_at, phase";
 
 impl Store {
     /// Opens (creating) `<data_dir>/crm-grasp.sqlite` and applies the migrations.
@@ -147,22 +142,33 @@ impl Store {
         std::fs::create_dir_all(data_dir.join("checkpoints"))?;
         std::fs::create_dir_all(data_dir.join("recordings"))?;
         let path = data_dir.join("crm-grasp.sqlite");
+        let created = !path.exists();
         let options = SqliteConnectOptions::from_str("sqlite:")?
             .filename(&path)
             .create_if_missing(true)
             .journal_mode(SqliteJournalMode::Wal)
             .foreign_keys(true)
             .busy_timeout(Duration::from_secs(10));
+        // Migrations run on their own connection with foreign keys off: rebuilding a table
+        // (SQLite's way to change a column) drops one that other rows reference.
+        let mut conn = options.clone().foreign_keys(false).connect().await?;
+        sqlx::migrate!("../migrations").run(&mut conn).await?;
+        conn.close().await?;
         let pool = SqlitePoolOptions::new()
             .max_connections(8)
             .connect_with(options)
             .await?;
-        sqlx::migrate!("../migrations").run(&pool).await?;
         Ok(Self {
             pool,
             checkpoints: data_dir.join("checkpoints"),
             recordings: data_dir.join("recordings"),
+            created,
         })
+    }
+
+    /// Whether this store was created by `open` (a new data folder).
+    pub fn created(&self) -> bool {
+        self.created
     }
 
     pub fn checkpoint_dir(&self) -> &Path {
@@ -316,7 +322,7 @@ impl Store {
 
     /// Puts running jobs whose lease expired back in the queue; returns how many.
     pub async fn requeue_expired(&self) -> Result<u64> {
-        let done = sqlx::query("UPDATE jobs SET state = 'queued', worker_id = NULL, lease_expires_at = NULL WHERE state = 'running' AND lease_expires_at < ?")
+        let done = sqlx::query("UPDATE jobs SET state = 'queued', worker_id = NULL, lease_expires_at = NULL, phase = NULL WHERE state = 'running' AND lease_expires_at < ?")
             .bind(now_ms())
             .execute(&self.pool)
             .await?;
@@ -378,14 +384,27 @@ impl Store {
             .bind(job).bind(it.steps as i64).bind(it.iteration as i64).bind(it.wall_s).bind(data)
             .execute(&mut *tx)
             .await?;
-        sqlx::query("UPDATE jobs SET progress = ?, steps = ?, steps_per_s = ? WHERE id = ?")
-            .bind(progress)
-            .bind(it.steps as i64)
-            .bind(it.steps_per_s)
-            .bind(job)
-            .execute(&mut *tx)
-            .await?;
+        sqlx::query(
+            "UPDATE jobs SET progress = ?, steps = ?, steps_per_s = ?, phase = NULL WHERE id = ?",
+        )
+        .bind(progress)
+        .bind(it.steps as i64)
+        .bind(it.steps_per_s)
+        .bind(job)
+        .execute(&mut *tx)
+        .await?;
         tx.commit().await?;
+        Ok(())
+    }
+
+    /// Records the phase a job is in before training (`{"name", "done", "total"}`).
+    pub async fn set_phase(&self, job: i64, name: &str, done: u64, total: u64) -> Result<()> {
+        let phase = serde_json::json!({"name": name, "done": done, "total": total});
+        sqlx::query("UPDATE jobs SET phase = ? WHERE id = ?")
+            .bind(phase.to_string())
+            .bind(job)
+            .execute(&self.pool)
+            .await?;
         Ok(())
     }
 
@@ -453,79 +472,6 @@ impl Store {
             return Err(StoreError::Conflict(job.state));
         }
         Ok(())
-    }
-
-    // ---- checkpoints ----
-
-    /// Records a checkpoint whose bytes are already at `file` in the checkpoint folder.
-    pub async fn add_checkpoint(
-        &self,
-        job: i64,
-        algorithm: &str,
-        steps: i64,
-        size: i64,
-        file: &str,
-    ) -> Result<CheckpointRow> {
-        let id: i64 = sqlx::query_scalar("INSERT INTO checkpoints (job_id, algorithm, steps, size, file, created_at) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
-            .bind(job).bind(algorithm).bind(steps).bind(size).bind(file).bind(now_ms())
-            .fetch_one(&self.pool)
-            .await?;
-        self.checkpoint(id).await
-    }
-
-    pub async fn checkpoint(&self, id: i64) -> Result<CheckpointRow> {
-        sqlx::query_as("SELECT * FROM checkpoints WHERE id = ?")
-            .bind(id)
-            .fetch_optional(&self.pool)
-            .await?
-            .ok_or(StoreError::NotFound)
-    }
-
-    pub async fn checkpoints(&self, job: Option<i64>) -> Result<Vec<CheckpointRow>> {
-        Ok(sqlx::query_as(
-            "SELECT * FROM checkpoints WHERE (?1 IS NULL OR job_id = ?1) ORDER BY id DESC",
-        )
-        .bind(job)
-        .fetch_all(&self.pool)
-        .await?)
-    }
-
-    /// The newest checkpoint of a job, to resume from.
-    pub async fn latest_checkpoint(&self, job: i64) -> Result<Option<CheckpointRow>> {
-        Ok(
-            sqlx::query_as("SELECT * FROM checkpoints WHERE job_id = ? ORDER BY id DESC LIMIT 1")
-                .bind(job)
-                .fetch_optional(&self.pool)
-                .await?,
-        )
-    }
-
-    /// Retention: removes the checkpoints of `job` older than its newest `keep`, except one
-    /// that is the job's final checkpoint or that an evaluation job names. Rows go first, in
-    /// one transaction, then their files; returns how many were removed.
-    pub async fn prune_checkpoints(&self, job: i64, keep: u32) -> Result<usize> {
-        let mut tx = self.pool.begin().await?;
-        let old: Vec<(i64, String)> = sqlx::query_as(
-            "SELECT id, file FROM checkpoints WHERE job_id = ?1 \
-             AND id NOT IN (SELECT id FROM checkpoints WHERE job_id = ?1 ORDER BY id DESC LIMIT ?2) \
-             AND id NOT IN (SELECT checkpoint_id FROM jobs WHERE checkpoint_id IS NOT NULL) \
-             AND id IS NOT (SELECT json_extract(result, '$.checkpoint_id') FROM jobs WHERE id = ?1)",
-        )
-        .bind(job)
-        .bind(i64::from(keep.max(1)))
-        .fetch_all(&mut *tx)
-        .await?;
-        for (id, _) in &old {
-            sqlx::query("DELETE FROM checkpoints WHERE id = ?")
-                .bind(id)
-                .execute(&mut *tx)
-                .await?;
-        }
-        tx.commit().await?;
-        for (_, file) in &old {
-            remove_file(&self.checkpoints.join(file)).await;
-        }
-        Ok(old.len())
     }
 
     /// Deletes a finished training run: its job, metrics, episode summaries, checkpoints,
@@ -604,10 +550,6 @@ impl Store {
             freed += size.max(0) as u64;
         }
         Ok(freed)
-    }
-
-    pub fn checkpoint_path(&self, row: &CheckpointRow) -> PathBuf {
-        self.checkpoints.join(&row.file)
     }
 }
 

@@ -1,11 +1,16 @@
 //! `crm eval`: a checkpoint's success rate and episode length per objective over random
-//! tasks with a fixed seed, as the paper's Table I.
+//! tasks with a fixed seed, as the paper's Table I. With `--coordinator URL` the checkpoint
+//! is uploaded to a coordinator and evaluated there by its workers; the output is the same.
 
 use std::path::PathBuf;
 
-use super::{EnvArgs, emit};
+use anyhow::{Context, bail};
+use serde_json::Value;
+
+use super::remote::Rest;
+use super::{EnvArgs, FingerMode, emit};
 use crate::jobs::eval::evaluate;
-use crm_api::EvalSpec;
+use crm_api::{EvalReport, EvalSpec};
 
 #[derive(clap::Args, Debug)]
 pub struct EvalArgs {
@@ -31,6 +36,14 @@ pub struct EvalArgs {
     pub deterministic: bool,
     #[arg(long)]
     pub json: bool,
+    /// Evaluate on a coordinator instead (its REST address, e.g. http://127.0.0.1:8080):
+    /// the checkpoint is uploaded (or found, if the same bytes were uploaded before) and an
+    /// evaluation job runs on its workers with the same settings.
+    #[arg(long, value_name = "URL")]
+    pub coordinator: Option<String>,
+    /// The coordinator's bearer token, for `--coordinator`.
+    #[arg(long, env = "CRM_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
@@ -44,11 +57,64 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         objective: args.env.protocol,
         deterministic: args.deterministic,
     };
-    let report = evaluate(&args.checkpoint, &spec, &args.env, None, |_, _, _| true)?;
+    let (report, mut value) = match &args.coordinator {
+        Some(url) => remote(url, &args, &spec)?,
+        None => {
+            let report = evaluate(&args.checkpoint, &spec, &args.env, None, |_, _, _| true)?;
+            let value = serde_json::to_value(&report)?;
+            (report, value)
+        }
+    };
     if args.json {
-        let mut value = serde_json::to_value(&report)?;
         value["checkpoint"] = serde_json::Value::from(args.checkpoint.display().to_string());
         return emit(&format!("{value}\n"));
     }
     emit(&report.markdown())
+}
+
+/// Uploads the checkpoint, runs the evaluation job on the coordinator and returns its report
+/// (with the job's extra fields, such as `checkpoint_id`).
+fn remote(url: &str, args: &EvalArgs, spec: &EvalSpec) -> anyhow::Result<(EvalReport, Value)> {
+    // Workers run the built-in benchmark and machine with randomization on.
+    let local_only = [
+        (args.env.benchmark.is_some(), "--benchmark"),
+        (args.env.spec.is_some(), "--spec"),
+        (args.env.no_randomization, "--no-randomization"),
+        (
+            args.env.finger_actions != FingerMode::Closing,
+            "--finger-actions",
+        ),
+    ];
+    if let Some((_, flag)) = local_only.iter().find(|(set, _)| *set) {
+        bail!("{flag}: not available with --coordinator (workers run the built-in settings)");
+    }
+    let rest = Rest::new(url, args.token.clone())?;
+    let checkpoint_id = rest.upload_checkpoint(&args.checkpoint)?;
+    let mut job = serde_json::to_value(spec)?;
+    job["kind"] = Value::from("eval");
+    job["checkpoint_id"] = Value::from(checkpoint_id);
+    let id = rest.submit(&job)?;
+    let bar = indicatif::ProgressBar::new(1000).with_message(format!("evaluation job {id}"));
+    let done = rest.wait(id, |p| bar.set_position((p * 1000.0) as u64))?;
+    bar.finish_and_clear();
+    let value = done["result"].clone();
+    let report: EvalReport =
+        serde_json::from_value(value.clone()).context("the evaluation job's result")?;
+    Ok((report, value))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    #[test]
+    fn the_coordinator_checks_the_environment_version_the_workers_run() {
+        assert_eq!(crm_api::checkpoint::ENV_VERSION, grasp_sim::ENV_VERSION);
+        // The shipped model passes the coordinator's upload check.
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/crm-ppo.safetensors");
+        let bytes = std::fs::read(model).expect("the shipped model");
+        let info = crm_api::checkpoint::inspect(&bytes, bytes.len() as u64).expect("a checkpoint");
+        assert_eq!(info.algorithm, crm_api::Algorithm::CrmPpo);
+        assert_eq!(info.env_version, grasp_sim::ENV_VERSION);
+    }
 }

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod eval;
 pub mod oracle;
 pub mod record;
+pub mod remote;
 pub mod results;
 pub mod service;
 pub mod tasks;

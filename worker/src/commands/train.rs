@@ -108,10 +108,23 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         curriculum: args.curriculum,
     };
     let mut trainer = Trainer::new(spec.clone(), &args.env, args.resume.as_deref(), None)?;
-    demos::imitate(&spec, &args.env, &mut trainer, |line| {
-        eprintln!("{line}");
-        true
-    })?;
+    let bar = indicatif::ProgressBar::new(0);
+    demos::imitate(
+        &spec,
+        &args.env,
+        &mut trainer,
+        |line| {
+            eprintln!("{line}");
+            true
+        },
+        |name, done, total| {
+            bar.set_length(total);
+            bar.set_position(done);
+            bar.set_message(name.to_string());
+            true
+        },
+    )?;
+    bar.finish_and_clear();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let metrics_path = args.out.join("metrics.jsonl");

@@ -41,25 +41,49 @@ pub struct Collected {
     pub successes: u64,
 }
 
-/// Runs `episodes` oracle episodes; keeps the rows of the successful ones.
+/// Runs `episodes` oracle episodes; keeps the rows of the successful ones (the tests' form of
+/// [`oracle_demos_with`]).
+#[cfg(test)]
 pub fn oracle_demos(source: &DemoSource, episodes: u64) -> anyhow::Result<Collected> {
-    let results: Vec<anyhow::Result<(bool, Demos)>> = (0..episodes)
-        .into_par_iter()
-        .map(|k| episode(source, source.seed.wrapping_add(k)))
-        .collect();
+    Ok(oracle_demos_with(source, episodes, |_| true)?.unwrap_or_default())
+}
+
+/// Episodes run in parallel per block of this many; progress is told between blocks.
+const BLOCK: u64 = 64;
+
+/// [`oracle_demos`], calling `progress(episodes done)` after each block of episodes; `None`
+/// when `progress` answers `false` (the job was cancelled). The same demonstrations whatever
+/// the block size or thread count: episode `k` runs with seed `seed + k`.
+pub fn oracle_demos_with(
+    source: &DemoSource,
+    episodes: u64,
+    mut progress: impl FnMut(u64) -> bool,
+) -> anyhow::Result<Option<Collected>> {
     let mut all = Collected {
         episodes,
         ..Collected::default()
     };
-    for result in results {
-        let (success, demos) = result?;
-        // The oracle's failures teach nothing.
-        if success {
-            all.successes += 1;
-            all.demos.extend(demos);
+    let mut start = 0;
+    while start < episodes {
+        let end = (start + BLOCK).min(episodes);
+        let results: Vec<anyhow::Result<(bool, Demos)>> = (start..end)
+            .into_par_iter()
+            .map(|k| episode(source, source.seed.wrapping_add(k)))
+            .collect();
+        for result in results {
+            let (success, demos) = result?;
+            // The oracle's failures teach nothing.
+            if success {
+                all.successes += 1;
+                all.demos.extend(demos);
+            }
+        }
+        start = end;
+        if !progress(end) {
+            return Ok(None);
         }
     }
-    Ok(all)
+    Ok(Some(all))
 }
 
 /// One oracle episode; returns whether it succeeded and its rows (the clean labels).
@@ -101,14 +125,22 @@ fn episode(source: &DemoSource, seed: u64) -> anyhow::Result<(bool, Demos)> {
     }
 }
 
+/// The phases of a job's imitation stage, as the coordinator shows them.
+pub const PHASE_DEMOS: &str = "demonstrations";
+pub const PHASE_CLONING: &str = "behaviour cloning";
+
 /// Runs a training job's imitation (`spec.imitation`; none: nothing to do) on `trainer`'s
-/// policy: behaviour cloning of the oracle's demonstrations. `note` gets a line saying what it gave and how long it
-/// took; its answer is returned (`false`: stop the job, as when it was cancelled meanwhile).
+/// policy: behaviour cloning of the oracle's demonstrations. `phase(name, done, total)` hears
+/// how far each phase is (episodes, then epochs) and `note` gets a line saying what it gave
+/// and how long it took; `false` from either stops it, and `false` is returned (stop the job,
+/// as when it was cancelled meanwhile).
+
 pub fn imitate(
     spec: &TrainSpec,
     env: &EnvArgs,
     trainer: &mut Trainer,
     mut note: impl FnMut(&str) -> bool,
+    mut phase: impl FnMut(&str, u64, u64) -> bool,
 ) -> anyhow::Result<bool> {
     let Some(imitation) = &spec.imitation else {
         return Ok(true);
@@ -131,8 +163,28 @@ pub fn imitate(
         seed: spec.seed.wrapping_mul(7_919).wrapping_add(1 << 32),
         noise: imitation.noise,
     };
-    let all = oracle_demos(&source, imitation.episodes)?;
-    let loss = trainer.imitate(&all.demos, imitation.epochs, imitation.learning_rate)?;
+    let total = imitation.episodes;
+    let collected = oracle_demos_with(&source, total, |done| phase(PHASE_DEMOS, done, total))?;
+    let Some(all) = collected else {
+        return Ok(false);
+    };
+    let epochs = imitation.epochs as u64;
+    let mut going = phase(PHASE_CLONING, 0, epochs);
+    if !going {
+        return Ok(false);
+    }
+    let loss = trainer.imitate(
+        &all.demos,
+        imitation.epochs,
+        imitation.learning_rate,
+        |done, _| {
+            going = phase(PHASE_CLONING, done as u64, epochs);
+            going
+        },
+    )?;
+    if !going {
+        return Ok(false);
+    }
     let line = format!(
         "behaviour cloning: {} of {} oracle episodes succeeded, {} steps, {} epochs, loss {loss:.4}, {:.0} s",
         all.successes,

@@ -171,9 +171,10 @@ impl Trainer {
         demos: &crm_learn::Demos,
         epochs: usize,
         learning_rate: f64,
+        on_epoch: impl FnMut(usize, f32) -> bool,
     ) -> anyhow::Result<f32> {
         match &mut self.learner {
-            Learner::Ppo(ppo) => Ok(ppo.imitate(demos, epochs, learning_rate)?),
+            Learner::Ppo(ppo) => Ok(ppo.imitate_with(demos, epochs, learning_rate, on_epoch)?),
             Learner::Sac(_) => bail!("behaviour cloning is for the PPO learners"),
         }
     }

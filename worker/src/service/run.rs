@@ -175,10 +175,30 @@ fn train(
     } else {
         // A resumed job's checkpoint already holds the clone; a fresh one clones first (when
         // its spec asks for imitation).
-        let finished = demos::imitate(&spec, &EnvArgs::default(), &mut trainer, |line| {
-            tracing::info!(job = job.job_id, "{line}");
-            !link.stopped()
-        })?;
+        // The phases report at most once a second (and when one ends), as evaluations do.
+        let mut last: Option<Instant> = None;
+        let mut sent = Ok(());
+        let finished = demos::imitate(
+            &spec,
+            &EnvArgs::default(),
+            &mut trainer,
+            |line| {
+                tracing::info!(job = job.job_id, "{line}");
+                !link.stopped()
+            },
+            |name, done, total| {
+                if done == total || last.is_none_or(|t| t.elapsed() >= Duration::from_secs(1)) {
+                    last = Some(Instant::now());
+                    sent = link.send(progress::Body::Phase(pb::PhaseProgress {
+                        name: name.to_string(),
+                        done,
+                        total,
+                    }));
+                }
+                sent.is_ok() && !link.stopped()
+            },
+        )?;
+        sent?;
         if !finished {
             return Ok(None);
         }

@@ -1,0 +1,167 @@
+//! Checkpoints: list (of a run, the uploaded ones, or all), one, download, and upload
+//! (`POST /api/v1/checkpoints`, the safetensors file as the body: checked as a worker's
+//! upload is, stored once by content hash).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use axum::Json;
+use axum::body::{Body, Bytes};
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{Path, Query, State};
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde_json::json;
+
+use super::error::{ApiError, parse_id};
+use crate::AppState;
+use crate::uploads::UploadError;
+
+type Res = Result<Response, ApiError>;
+
+pub async fn list(
+    State(state): State<Arc<AppState>>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Res {
+    let mut job = None;
+    let mut uploaded = false;
+    for (key, value) in &query {
+        match key.as_str() {
+            "job_id" => {
+                job = Some(
+                    parse_id(value)
+                        .map_err(|_| ApiError::invalid("job_id", "a positive integer"))?,
+                )
+            }
+            "uploaded" => {
+                uploaded = match value.as_str() {
+                    "true" => true,
+                    "false" => false,
+                    _ => return Err(ApiError::invalid("uploaded", "true or false")),
+                }
+            }
+            other => return Err(ApiError::invalid(other, "unknown query parameter")),
+        }
+    }
+    let checkpoints = state
+        .store
+        .checkpoints(job, uploaded)
+        .await
+        .map_err(|e| ApiError::store("checkpoint", e))?;
+    Ok(Json(json!({ "checkpoints": checkpoints })).into_response())
+}
+
+pub async fn get(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let row = state
+        .store
+        .checkpoint(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("checkpoint", e))?;
+    Ok(Json(row).into_response())
+}
+
+pub async fn download(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let row = state
+        .store
+        .checkpoint(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("checkpoint", e))?;
+    // Checkpoints are small (about a megabyte): read whole.
+    let bytes = tokio::fs::read(state.store.checkpoint_path(&row))
+        .await
+        .map_err(ApiError::internal)?;
+    let body = Body::from(bytes);
+    let name = match (row.job_id, &row.name) {
+        (Some(job), _) => format!("{}-job{job}-{}.safetensors", row.algorithm, row.steps),
+        (None, Some(name)) => format!("{}.safetensors", file_safe(name)),
+        (None, None) => format!("{}-checkpoint{}.safetensors", row.algorithm, row.id),
+    };
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/octet-stream".to_string()),
+            (header::CONTENT_LENGTH, row.size.to_string()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"{name}\""),
+            ),
+        ],
+        body,
+    )
+        .into_response())
+}
+
+/// A label as a file name: letters, digits, `-`, `_` and `.`; anything else becomes `_`.
+fn file_safe(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// `POST /api/v1/checkpoints?name=LABEL`: 201 with the new checkpoint, 200 with the existing
+/// one when the same bytes were uploaded before. A body that is not a checkpoint: 400; one of
+/// another environment version: 422; over `max_checkpoint_bytes`: 413. Nothing is stored
+/// for a refused body.
+pub async fn upload(
+    State(state): State<Arc<AppState>>,
+    Query(query): Query<HashMap<String, String>>,
+    body: Result<Bytes, BytesRejection>,
+) -> Res {
+    let mut name = None;
+    for (key, value) in &query {
+        match key.as_str() {
+            "name" => name = Some(value.as_str()),
+            other => return Err(ApiError::invalid(other, "unknown query parameter")),
+        }
+    }
+    let body = body.map_err(|rejection| ApiError {
+        status: rejection.status(),
+        code: if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            "too_large"
+        } else {
+            "invalid_body"
+        },
+        message: format!(
+            "{} (checkpoints up to {} bytes)",
+            rejection.body_text(),
+            state.config.max_checkpoint_bytes
+        ),
+        field: Some("body".into()),
+    })?;
+    match crate::uploads::store(&state, &body, name).await {
+        Ok((row, created)) => {
+            if created {
+                tracing::info!(checkpoint = row.id, name = ?row.name, "checkpoint uploaded");
+                state.notify();
+            }
+            let status = if created {
+                StatusCode::CREATED
+            } else {
+                StatusCode::OK
+            };
+            Ok((status, Json(row)).into_response())
+        }
+        Err(UploadError::Checkpoint(why)) => Err(ApiError {
+            status: if why.is_mismatch() {
+                StatusCode::UNPROCESSABLE_ENTITY
+            } else {
+                StatusCode::BAD_REQUEST
+            },
+            code: if why.is_mismatch() {
+                "env_version_mismatch"
+            } else {
+                "not_a_checkpoint"
+            },
+            message: why.to_string(),
+            field: Some("body".into()),
+        }),
+        Err(UploadError::Name(why)) => Err(ApiError::invalid("name", why)),
+        Err(UploadError::Store(err)) => Err(ApiError::store("checkpoint", err)),
+        Err(err @ UploadError::Io(_)) => Err(ApiError::internal(err)),
+    }
+}
