@@ -117,6 +117,7 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
             r#"{"kind": "train", "algorithm": "dqn", "steps": 10}"#,
             "algorithm",
         ),
+        (r#"{"kind": "train", "algorithm": "lppo"}"#, "steps"),
         (
             r#"{"kind": "train", "algorithm": "crm-sac", "steps": 10, "sac": {"tau": 2}}"#,
             "sac.tau",

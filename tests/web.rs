@@ -3,7 +3,7 @@
 //! (two seeds of one configuration and another algorithm), their evaluations and evaluations
 //! with forced topologies; then `web/tests/dashboard.mjs` (playwright-core driving Debian's
 //! `/usr/bin/chromium`) loads every page, submits a job through the form, compares runs and
-//! deletes one from its page.
+//! deletes one from its page; a small sweep shows its Table I.
 //!
 //! Needs `node`, `npm ci --prefix web` and Chromium (`.ci/run` installs them). Set
 //! `CRM_SKIP_BROWSER=1` to skip on a machine without them; `CRM_SCREENSHOTS=DIR` keeps a PNG
@@ -93,6 +93,20 @@ fn the_dashboard_works_in_chromium() {
     for &id in &evals {
         wait_state(&addr, id, "succeeded", 300);
     }
+    // A sweep: two algorithms, one seed, each final checkpoint evaluated.
+    let sweep = support::submit_to(
+        &addr,
+        "/api/v1/sweeps",
+        &json!({"name": "browser sweep", "base": {"task": "mouse-press", "steps": 2048, "envs": 2, "config": {"rollout_steps": 1024}},
+                "axes": {"algorithm": ["crm-ppo", "lppo"], "seed": [4]}, "eval": {"episodes": 3, "task": "mouse-press"}})
+        .to_string(),
+    )["sweep"]["id"]
+        .as_i64()
+        .expect("sweep id");
+    support::wait_for(300, "the sweep's jobs", || {
+        let sweep = get(&addr, &format!("/api/v1/sweeps/{sweep}"));
+        (sweep["progress"]["succeeded"] == 4).then_some(())
+    });
     // Without a worker, the job the browser submits stays queued until it cancels it.
     let _ = worker.0.kill();
     let _ = worker.0.wait();
@@ -101,7 +115,10 @@ fn the_dashboard_works_in_chromium() {
         .arg(web.join("tests/dashboard.mjs"))
         .current_dir(&web)
         .env("CRM_BASE", format!("http://{addr}"))
-        .env("CRM_SEED", json!({"runs": runs}).to_string())
+        .env(
+            "CRM_SEED",
+            json!({"runs": runs, "sweep": sweep}).to_string(),
+        )
         .env("CRM_MODEL", models.join("crm-ppo.safetensors"))
         .output()
         .expect("run node (is Node.js installed?)");
@@ -111,6 +128,9 @@ fn the_dashboard_works_in_chromium() {
         out.status.success(),
         "browser checks failed:\n{stdout}\n{stderr}"
     );
-    assert!(stdout.contains("9 of 9 browser checks passed"), "{stdout}");
+    assert!(
+        stdout.contains("10 of 10 browser checks passed"),
+        "{stdout}"
+    );
     println!("{stdout}");
 }

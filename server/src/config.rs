@@ -50,6 +50,9 @@ pub struct ServerConfig {
     /// starts on a new data folder (skipped when missing).
     #[arg(long, default_value = "models")]
     pub models: PathBuf,
+    /// Most training jobs one sweep may create.
+    #[arg(long, default_value_t = 200)]
+    pub max_sweep_jobs: usize,
 }
 
 impl Default for ServerConfig {
@@ -68,6 +71,7 @@ impl Default for ServerConfig {
             episodes_kept: 200,
             keep_checkpoints: 3,
             models: PathBuf::from("models"),
+            max_sweep_jobs: 200,
         }
     }
 }

@@ -49,6 +49,11 @@ const ASSETS: &[(&str, &str, &str)] = &[
         include_str!("../../web/src/models.js"),
     ),
     (
+        "sweeps.js",
+        "text/javascript",
+        include_str!("../../web/src/sweeps.js"),
+    ),
+    (
         "topology.js",
         "text/javascript",
         include_str!("../../web/src/topology.js"),
@@ -62,6 +67,8 @@ pub fn routes() -> Router<Arc<AppState>> {
         .route("/compare", get(page))
         .route("/topology", get(page))
         .route("/models", get(page))
+        .route("/sweeps", get(page))
+        .route("/sweeps/{id}", get(sweep_page))
         .route("/runs/{id}", get(run_page))
         .route("/assets/{name}", get(asset))
 }
@@ -85,6 +92,18 @@ async fn page() -> Response {
 async fn run_page(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
     let found = match id.parse::<i64>() {
         Ok(id) if id > 0 => state.store.job(id).await.is_ok_and(|j| j.kind == "train"),
+        _ => false,
+    };
+    shell(if found {
+        StatusCode::OK
+    } else {
+        StatusCode::NOT_FOUND
+    })
+}
+
+async fn sweep_page(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
+    let found = match id.parse::<i64>() {
+        Ok(id) if id > 0 => state.store.sweep(id).await.is_ok(),
         _ => false,
     };
     shell(if found {

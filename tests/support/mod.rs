@@ -287,6 +287,18 @@ pub fn wait_state(addr: &str, id: i64, state: &str, secs: u64) -> Value {
 }
 
 /// Submits a job (JSON text) and returns the stored job; any status but 201 fails the test.
+/// POSTs `body` to `path` with no token and expects 201; returns the answer.
+pub fn submit_to(addr: &str, path: &str, body: &str) -> Value {
+    let reply = http(addr, "POST", path, Some(body), None);
+    assert_eq!(
+        reply.status,
+        201,
+        "{}",
+        String::from_utf8_lossy(&reply.body)
+    );
+    reply.json()
+}
+
 pub fn submit(addr: &str, body: &str) -> Value {
     submit_as(addr, body, None)
 }

@@ -6,6 +6,7 @@ import { renderRun } from './run.js';
 import { renderCompare } from './compare.js';
 import { renderTopology } from './topology.js';
 import { renderModels } from './models.js';
+import { renderSweep, renderSweeps } from './sweeps.js';
 
 const main = document.getElementById('main');
 const path = window.location.pathname.replace(/\/+$/, '') || '/';
@@ -27,6 +28,7 @@ onChange(workers);
 
 const nav = (name) => document.querySelector(`[data-nav="${name}"]`)?.classList.add('active');
 const run = path.match(/^\/runs\/([^/]+)$/);
+const sweep = path.match(/^\/sweeps\/([^/]+)$/);
 if (path === '/') {
   nav('jobs');
   renderJobs(main);
@@ -36,6 +38,12 @@ if (path === '/') {
 } else if (path === '/compare') {
   nav('compare');
   renderCompare(main);
+} else if (path === '/sweeps') {
+  nav('sweeps');
+  renderSweeps(main);
+} else if (sweep) {
+  nav('sweeps');
+  renderSweep(main, sweep[1]);
 } else if (path === '/models') {
   nav('models');
   renderModels(main);

@@ -267,6 +267,29 @@ check('the models page lists the shipped model, refuses a file that is no checkp
   await shot('models');
 });
 
+check('a sweep page shows its progress, curves per configuration and Table I with the best cells bold', async () => {
+  await page.goto(`${base}/sweeps`);
+  await page.waitForSelector(`#sweeps tr[data-sweep="${seed.sweep}"]`);
+  assert.match(await page.textContent(`#sweeps tr[data-sweep="${seed.sweep}"]`), /browser sweep/);
+  await page.click(`#sweeps tr[data-sweep="${seed.sweep}"] a`);
+  await page.waitForSelector('#sweep-table tbody tr');
+  assert.match(await page.textContent('#sweep-progress'), /4 of 4 jobs finished/);
+  const api_ = await api(`/api/v1/sweeps/${seed.sweep}`);
+  const rows = await page.$$eval('#sweep-table tbody tr', (trs) => trs.map((tr) => tr.children[0].textContent));
+  assert.deepEqual(rows, api_.table.rows.map((r) => r.label));
+  // The overall success cell reads the API's mean ± std.
+  const first = api_.table.rows[0].overall.success;
+  const shown = await page.textContent('#sweep-table tbody tr[data-row="0"] td:nth-child(4)');
+  assert.equal(shown, `${first.mean.toFixed(2)} ± ${first.std.toFixed(2)}`);
+  assert.ok(await page.$('#sweep-table td.best'), 'a best cell is bold');
+  await chartsDrawn(2);
+  const href = await page.getAttribute('#compare-sweep', 'href');
+  const trainIds = api_.jobs.filter((j) => j.kind === 'train').map((j) => j.id);
+  assert.equal(href, `/compare?runs=${trainIds.join(',')}`);
+  assert.equal(await page.isDisabled('#cancel-sweep'), true);
+  await shot('sweep');
+});
+
 // Last: it removes run C (the other checks use it).
 check('a finished run shows its disk use and can be deleted from its page', async () => {
   const before = await api(`/api/v1/runs/${runC}`);

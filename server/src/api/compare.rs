@@ -394,6 +394,7 @@ mod tests {
             attempts: 1,
             lease_expires_at: None,
             phase: None,
+            sweep_id: None,
             progress: 1.0,
             steps: 0,
             steps_per_s: None,

@@ -152,7 +152,7 @@ impl Axis {
 
 /// Parses `runs=1,2,3`: at most 12 positive ids, each an existing training run.
 /// Most runs one chart or comparison takes.
-pub const MAX_RUNS: usize = 12;
+pub const MAX_RUNS: usize = 50;
 
 /// The runs of `runs=1,2,3` (1 to [`MAX_RUNS`] positive ids, comma-separated, no spaces or
 /// leading zeros; a repeated id counts once), each a training run.

@@ -28,7 +28,18 @@ const STATES: [&str; 5] = ["queued", "running", "succeeded", "failed", "cancelle
 
 fn decode<T: DeserializeOwned>(value: Value, prefix: &str) -> Result<T, ApiError> {
     serde_path_to_error::deserialize(value).map_err(|err| {
-        let path = err.path().to_string();
+        let mut path = err.path().to_string();
+        // A missing field is reported at its parent: name the field itself.
+        let message = err.inner().to_string();
+        if let Some(name) = message
+            .strip_prefix("missing field `")
+            .and_then(|rest| rest.split('`').next())
+        {
+            path = match path.as_str() {
+                "." => name.to_string(),
+                parent => format!("{parent}.{name}"),
+            };
+        }
         let field = match (prefix, path.as_str()) {
             (p, ".") => p.trim_end_matches('.').to_string(),
             (p, path) => format!("{p}{path}"),
@@ -38,21 +49,22 @@ fn decode<T: DeserializeOwned>(value: Value, prefix: &str) -> Result<T, ApiError
 }
 
 /// A validated submission.
-struct Submission {
-    kind: &'static str,
-    algorithm: String,
-    task: Option<String>,
-    spec: String,
-    checkpoint_id: Option<i64>,
+pub(super) struct Submission {
+    pub kind: &'static str,
+    pub algorithm: String,
+    pub task: Option<String>,
+    pub spec: String,
+    pub checkpoint_id: Option<i64>,
 }
 
 /// The tasks column: the task ids joined, or none for random tasks.
-fn label(task: &Option<String>, tasks: &[String]) -> Option<String> {
+pub(super) fn label(task: &Option<String>, tasks: &[String]) -> Option<String> {
     let list = crm_api::jobs::task_list(task, tasks);
     (!list.is_empty()).then(|| list.join(","))
 }
 
-async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError> {
+/// Checks a job submission (`kind` train or eval) field by field; nothing is stored.
+pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError> {
     let Value::Object(mut fields) = body else {
         return Err(ApiError::invalid("body", "expected a JSON object"));
     };
@@ -63,30 +75,7 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
     };
     let catalog = &state.catalog;
     let check_task = |task: &Option<String>, tasks: &[String], topology: &Option<String>| {
-        let named = task.iter().map(|t| ("task".to_string(), t));
-        let listed = tasks
-            .iter()
-            .enumerate()
-            .map(|(k, t)| (format!("tasks[{k}]"), t));
-        for (field, id) in named.chain(listed) {
-            if catalog.task(id).is_none() {
-                return Err(ApiError::invalid(
-                    field,
-                    format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
-                ));
-            }
-        }
-        match topology.as_deref() {
-            None | Some("task") | Some("auto") => Ok(()),
-            Some(name) if catalog.topologies.iter().any(|t| t == name) => Ok(()),
-            Some(name) => Err(ApiError::invalid(
-                "topology",
-                format!(
-                    "unknown topology {name:?}: \"task\", \"auto\" or one of {}",
-                    catalog.topologies.join(", ")
-                ),
-            )),
-        }
+        check_task(catalog, task, tasks, topology)
     };
     match kind.as_str() {
         "train" => {
@@ -127,15 +116,7 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
                 Some(_) => None,
             }
             .ok_or_else(|| ApiError::invalid("checkpoint_id", "must be a positive integer"))?;
-            let spec: EvalSpec = decode(Value::Object(fields), "")?;
-            if spec.episodes == 0 || spec.episodes > MAX_EPISODES {
-                return Err(ApiError::invalid(
-                    "episodes",
-                    format!("must be between 1 and {MAX_EPISODES}"),
-                ));
-            }
-            check_task(&spec.task, &spec.tasks, &spec.topology)?;
-            check_record(&spec.record)?;
+            let spec = eval_spec(catalog, Value::Object(fields))?;
             let checkpoint = state.store.checkpoint(checkpoint_id).await.map_err(|_| {
                 ApiError::not_found("checkpoint_id", format!("no checkpoint {checkpoint_id}"))
             })?;
@@ -152,6 +133,54 @@ async fn validate(state: &AppState, body: Value) -> Result<Submission, ApiError>
             format!("{other:?}: must be \"train\" or \"eval\""),
         )),
     }
+}
+
+/// Checks task ids and a topology name against the catalog, naming the field.
+pub(super) fn check_task(
+    catalog: &crm_api::Catalog,
+    task: &Option<String>,
+    tasks: &[String],
+    topology: &Option<String>,
+) -> Result<(), ApiError> {
+    let named = task.iter().map(|t| ("task".to_string(), t));
+    let listed = tasks
+        .iter()
+        .enumerate()
+        .map(|(k, t)| (format!("tasks[{k}]"), t));
+    for (field, id) in named.chain(listed) {
+        if catalog.task(id).is_none() {
+            return Err(ApiError::invalid(
+                field,
+                format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
+            ));
+        }
+    }
+    match topology.as_deref() {
+        None | Some("task") | Some("auto") => Ok(()),
+        Some(name) if catalog.topologies.iter().any(|t| t == name) => Ok(()),
+        Some(name) => Err(ApiError::invalid(
+            "topology",
+            format!(
+                "unknown topology {name:?}: \"task\", \"auto\" or one of {}",
+                catalog.topologies.join(", ")
+            ),
+        )),
+    }
+}
+
+/// An evaluation's parameters (an eval submission without `kind` and `checkpoint_id`),
+/// checked against the catalog.
+pub(super) fn eval_spec(catalog: &crm_api::Catalog, fields: Value) -> Result<EvalSpec, ApiError> {
+    let spec: EvalSpec = decode(fields, "")?;
+    if spec.episodes == 0 || spec.episodes > MAX_EPISODES {
+        return Err(ApiError::invalid(
+            "episodes",
+            format!("must be between 1 and {MAX_EPISODES}"),
+        ));
+    }
+    check_task(catalog, &spec.task, &spec.tasks, &spec.topology)?;
+    check_record(&spec.record)?;
+    Ok(spec)
 }
 
 fn check_imitation(spec: &TrainSpec) -> Result<(), ApiError> {
@@ -234,6 +263,7 @@ pub async fn create(
         spec: &submission.spec,
         checkpoint_id: submission.checkpoint_id,
         rerun_of: None,
+        sweep_id: None,
     };
     let (job, created) = match &key {
         Some(key) => {
@@ -340,6 +370,7 @@ pub async fn rerun(
             spec: &old.spec,
             checkpoint_id: old.checkpoint_id,
             rerun_of: Some(old.id),
+            sweep_id: None,
         })
         .await
         .map_err(|e| ApiError::store("job", e))?;

@@ -10,6 +10,8 @@ mod error;
 mod events;
 mod jobs;
 mod resources;
+mod sweeps;
+mod table;
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -36,6 +38,9 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/jobs/{id}/cancel", post(jobs::cancel))
         .route("/jobs/{id}/rerun", post(jobs::rerun))
         .route("/jobs/{id}/recording", get(resources::recording))
+        .route("/sweeps", get(sweeps::list).post(sweeps::create))
+        .route("/sweeps/{id}", get(sweeps::get))
+        .route("/sweeps/{id}/cancel", post(sweeps::cancel))
         .route("/runs", get(resources::runs))
         .route(
             "/runs/{id}",

@@ -426,18 +426,16 @@ impl Coordinator for CoordinatorService {
         if serde_json::from_str::<serde_json::Value>(&r.result_json).is_err() {
             return Err(Status::invalid_argument("result_json: not JSON"));
         }
-        self.state
+        let evaluation = self
+            .state
             .store
-            .finish(
-                &r.worker_id,
-                r.job_id,
-                "succeeded",
-                Some(&r.result_json),
-                None,
-            )
+            .succeed(&r.worker_id, r.job_id, &r.result_json)
             .await
             .map_err(status)?;
         tracing::info!(job = r.job_id, worker = r.worker_id, "job succeeded");
+        if let Some(eval) = evaluation {
+            tracing::info!(job = r.job_id, eval, "the sweep's evaluation queued");
+        }
         self.state.notify();
         Ok(Response::new(pb::CompleteReply {}))
     }

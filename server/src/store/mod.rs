@@ -12,9 +12,11 @@ use sqlx::{ConnectOptions, Connection, FromRow, SqlitePool};
 
 mod checkpoints;
 mod recordings;
+mod sweeps;
 
 pub use checkpoints::{CheckpointRow, NewCheckpoint};
 pub use recordings::RecordingRow;
+pub use sweeps::SweepRow;
 
 /// Milliseconds since the Unix epoch.
 pub fn now_ms() -> i64 {
@@ -50,6 +52,8 @@ pub struct Job {
     /// Before training reports: the phase (`{"name", "done", "total"}`), else `None`.
     #[serde(serialize_with = "as_json_opt")]
     pub phase: Option<String>,
+    /// The sweep it belongs to.
+    pub sweep_id: Option<i64>,
 }
 
 /// Stored JSON text goes out as JSON, not as a string.
@@ -95,6 +99,7 @@ pub struct JobFilter {
 }
 
 /// A new job.
+#[derive(Clone, Copy)]
 pub struct NewJob<'a> {
     pub kind: &'a str,
     pub algorithm: &'a str,
@@ -102,6 +107,8 @@ pub struct NewJob<'a> {
     pub spec: &'a str,
     pub checkpoint_id: Option<i64>,
     pub rerun_of: Option<i64>,
+    /// The sweep it belongs to.
+    pub sweep_id: Option<i64>,
 }
 
 /// Why a state change was refused.
@@ -134,7 +141,7 @@ pub struct Store {
     created: bool,
 }
 
-const JOB_COLUMNS: &str = "id, kind, state, algorithm, task, spec, checkpoint_id, rerun_of, worker_id, attempts, lease_expires_at, progress, steps, steps_per_s, result, error, created_at, started_at, finished_at, phase";
+const JOB_COLUMNS: &str = "id, kind, state, algorithm, task, spec, checkpoint_id, rerun_of, worker_id, attempts, lease_expires_at, progress, steps, steps_per_s, result, error, created_at, started_at, finished_at, phase, sweep_id";
 
 impl Store {
     /// Opens (creating) `<data_dir>/crm-grasp.sqlite` and applies the migrations.
@@ -463,14 +470,9 @@ impl Store {
         result: Option<&str>,
         error: Option<&str>,
     ) -> Result<()> {
-        let done = sqlx::query("UPDATE jobs SET state = ?, result = ?, error = ?, finished_at = ?, lease_expires_at = NULL, progress = CASE WHEN ? = 'succeeded' THEN 1.0 ELSE progress END WHERE id = ? AND worker_id = ? AND state = 'running'")
-            .bind(state).bind(result).bind(error).bind(now_ms()).bind(state).bind(job).bind(worker)
-            .execute(&self.pool)
-            .await?;
-        if done.rows_affected() == 0 {
-            let job = self.job(job).await?;
-            return Err(StoreError::Conflict(job.state));
-        }
+        let mut tx = self.pool.begin().await?;
+        finish_row(&mut tx, worker, job, state, result, error).await?;
+        tx.commit().await?;
         Ok(())
     }
 
@@ -553,14 +555,38 @@ impl Store {
     }
 }
 
+/// Ends a job the worker holds, inside `tx`; a job not running on `worker` is a conflict
+/// (or not found).
+async fn finish_row(
+    tx: &mut sqlx::SqliteConnection,
+    worker: &str,
+    job: i64,
+    state: &str,
+    result: Option<&str>,
+    error: Option<&str>,
+) -> Result<()> {
+    let done = sqlx::query("UPDATE jobs SET state = ?, result = ?, error = ?, finished_at = ?, lease_expires_at = NULL, progress = CASE WHEN ? = 'succeeded' THEN 1.0 ELSE progress END WHERE id = ? AND worker_id = ? AND state = 'running'")
+        .bind(state).bind(result).bind(error).bind(now_ms()).bind(state).bind(job).bind(worker)
+        .execute(&mut *tx)
+        .await?;
+    if done.rows_affected() == 0 {
+        let now: Option<String> = sqlx::query_scalar("SELECT state FROM jobs WHERE id = ?")
+            .bind(job)
+            .fetch_optional(&mut *tx)
+            .await?;
+        return Err(now.map_or(StoreError::NotFound, StoreError::Conflict));
+    }
+    Ok(())
+}
+
 /// Queues a new job; returns its id.
-async fn insert_job<'e>(
+pub(crate) async fn insert_job<'e>(
     conn: impl sqlx::Executor<'e, Database = sqlx::Sqlite>,
     job: &NewJob<'_>,
 ) -> Result<i64> {
-    Ok(sqlx::query_scalar("INSERT INTO jobs (kind, state, algorithm, task, spec, checkpoint_id, rerun_of, created_at) VALUES (?, 'queued', ?, ?, ?, ?, ?, ?) RETURNING id")
+    Ok(sqlx::query_scalar("INSERT INTO jobs (kind, state, algorithm, task, spec, checkpoint_id, rerun_of, sweep_id, created_at) VALUES (?, 'queued', ?, ?, ?, ?, ?, ?, ?) RETURNING id")
         .bind(job.kind).bind(job.algorithm).bind(job.task).bind(job.spec)
-        .bind(job.checkpoint_id).bind(job.rerun_of).bind(now_ms())
+        .bind(job.checkpoint_id).bind(job.rerun_of).bind(job.sweep_id).bind(now_ms())
         .fetch_one(conn)
         .await?)
 }

@@ -134,7 +134,6 @@ pub const PHASE_CLONING: &str = "behaviour cloning";
 /// how far each phase is (episodes, then epochs) and `note` gets a line saying what it gave
 /// and how long it took; `false` from either stops it, and `false` is returned (stop the job,
 /// as when it was cancelled meanwhile).
-
 pub fn imitate(
     spec: &TrainSpec,
     env: &EnvArgs,
