@@ -223,3 +223,118 @@ fn a_sweep_is_validated_whole_runs_its_grid_and_aggregates_table_one() {
         404
     );
 }
+
+/// `crm results`' cell: `success ± std (length ± std)`.
+fn cell(stats: &Value) -> String {
+    let (s, l) = (&stats["success"], &stats["length"]);
+    format!(
+        "{:.2} ± {:.2} ({:.0} ± {:.0})",
+        s["mean"].as_f64().expect("mean"),
+        s["std"].as_f64().expect("std"),
+        l["mean"].as_f64().expect("mean"),
+        l["std"].as_f64().expect("std")
+    )
+}
+
+#[test]
+fn crm_results_runs_its_study_as_a_sweep_and_writes_the_sweeps_numbers() {
+    let data = TempDir::new("results");
+    let out = TempDir::new("results-out");
+    let server = start_server(&data.0, &["--token", TOKEN]);
+    let addr = server.http.clone();
+    let _worker = start_worker(&format!("http://{}", server.grpc), &["--token", TOKEN]);
+    let url = format!("http://{addr}");
+    let run = std::process::Command::new(crm())
+        .args([
+            "results",
+            "--coordinator",
+            &url,
+            "--token",
+            TOKEN,
+            "--steps",
+            "1024",
+            "--seeds",
+            "2",
+        ])
+        .args([
+            "--algo",
+            "crm-ppo",
+            "--algo",
+            "ippo",
+            "--episodes",
+            "4",
+            "--task",
+            "mouse-press",
+            "--envs",
+            "1",
+        ])
+        .arg("--out")
+        .arg(&out.0)
+        .output()
+        .expect("run crm results");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let text = std::fs::read_to_string(out.0.join("RESULTS.md")).expect("RESULTS.md");
+    for png in ["success.png", "episode_length.png"] {
+        let bytes = std::fs::read(out.0.join("results").join(png)).expect("a plot");
+        assert!(bytes.starts_with(b"\x89PNG"), "{png}");
+    }
+    // The file names its sweep; its numbers are the sweep's, cell by cell.
+    let id = text
+        .split("(sweep ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|n| n.parse::<i64>().ok())
+        .expect("the sweep id in RESULTS.md");
+    let sweep = get(&addr, &format!("/api/v1/sweeps/{id}"));
+    let rows = sweep["table"]["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 2);
+    let line = |objective: &str| -> Vec<String> {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("| {objective} |")))
+            .unwrap_or_else(|| panic!("no {objective} row in\n{text}"));
+        line.split('|')
+            .map(|c| c.trim().trim_matches('*').to_string())
+            .collect()
+    };
+    for (objective, pick) in [("overall", None), ("press", Some("press"))] {
+        let cells = line(objective);
+        for (k, row) in rows.iter().enumerate() {
+            let stats = match pick {
+                None => &row["overall"],
+                Some(o) => &row["per_objective"][o],
+            };
+            // | objective | ours | paper | ours | paper |
+            assert_eq!(
+                cells[2 + 2 * k],
+                cell(stats),
+                "{objective}, {}",
+                row["label"]
+            );
+        }
+    }
+    assert!(
+        text.contains("| crm-ppo | paper | ippo | paper |"),
+        "{text}"
+    );
+    // The paper's press numbers stand beside ours.
+    assert_eq!(line("press")[3], "0.96 (167)");
+
+    // An unreachable coordinator: exit 2, naming the address.
+    let out = std::process::Command::new(crm())
+        .args([
+            "results",
+            "--coordinator",
+            "http://127.0.0.1:9",
+            "--steps",
+            "10",
+        ])
+        .output()
+        .expect("run crm results");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("http://127.0.0.1:9"));
+}

@@ -46,8 +46,13 @@ pub fn summary(sweep: &Value, jobs: &[Job]) -> Summary {
         .unwrap_or_default();
     let has_eval = sweep["eval"].is_object();
     let train: Vec<&Job> = jobs.iter().filter(|j| j.kind == "train").collect();
-    // Every training job, and its evaluation when the sweep has one.
-    let total = train.len() * if has_eval { 2 } else { 1 };
+    // Every training job, and the evaluation of each that has not failed or been cancelled
+    // (the only ones that will have a final checkpoint), when the sweep has an evaluation.
+    let evaluable = train
+        .iter()
+        .filter(|j| j.state != "failed" && j.state != "cancelled")
+        .count();
+    let total = train.len() + if has_eval { evaluable } else { 0 };
     let count = |state: &str| jobs.iter().filter(|j| j.state == state).count();
     let (succeeded, failed, cancelled) = (count("succeeded"), count("failed"), count("cancelled"));
     let finished = succeeded + failed + cancelled;
@@ -290,5 +295,28 @@ mod tests {
         assert_eq!(summary.progress["jobs"], 4);
         assert_eq!(summary.progress["finished"], 3);
         assert_eq!(mean_std(&[]), json!({"mean": null, "std": null, "n": 0}));
+    }
+
+    #[test]
+    fn a_failed_run_expects_no_evaluation_so_the_sweep_can_finish() {
+        let sweep = json!({"axes": {"seed": [0, 1]}, "eval": {"episodes": 10}});
+        let mut failed = job(2, "train", "ppo", json!({"seed": 1}), json!({}), None);
+        failed.state = "failed".into();
+        let jobs = vec![
+            job(
+                1,
+                "train",
+                "ppo",
+                json!({"seed": 0}),
+                json!({"checkpoint_id": 5}),
+                None,
+            ),
+            failed,
+            job(3, "eval", "ppo", json!({}), report(0.5, 12.0), Some(5)),
+        ];
+        let summary = summary(&sweep, &jobs);
+        assert_eq!(summary.progress["jobs"], 3);
+        assert_eq!(summary.progress["fraction"], 1.0);
+        assert_eq!(summary.progress["failed"], 1);
     }
 }

@@ -1,6 +1,6 @@
 //! A small client of the coordinator's REST API for commands that run on a coordinator
-//! instead of here (`crm eval --coordinator URL`): upload a checkpoint, submit a job, wait
-//! for it. Errors name the address and carry the API's own message and field.
+//! instead of here (`crm eval --coordinator URL`, `crm results`): upload a checkpoint, submit
+//! a job or a sweep, wait for it, read resources. Errors name the address and carry the API's own message and field.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -107,11 +107,21 @@ impl Rest {
 
     /// Queues a job; returns its id.
     pub fn submit(&self, job: &Value) -> anyhow::Result<i64> {
-        let body = serde_json::to_vec(job)?;
-        let job = self.call("POST", "/api/v1/jobs", Some(("application/json", &body)))?;
+        let job = self.post_json("/api/v1/jobs", job)?;
         job["id"]
             .as_i64()
             .context("the coordinator's answer has no job id")
+    }
+
+    /// POSTs a JSON body; returns the answer.
+    pub fn post_json(&self, path: &str, body: &Value) -> anyhow::Result<Value> {
+        let body = serde_json::to_vec(body)?;
+        self.call("POST", path, Some(("application/json", &body)))
+    }
+
+    /// GETs a JSON resource.
+    pub fn get(&self, path: &str) -> anyhow::Result<Value> {
+        self.call("GET", path, None)
     }
 
     /// Waits for a job to finish, calling `progress` with its progress (0 to 1) as it
@@ -119,7 +129,7 @@ impl Rest {
     pub fn wait(&self, id: i64, mut progress: impl FnMut(f64)) -> anyhow::Result<Value> {
         let started = Instant::now();
         loop {
-            let job = self.call("GET", &format!("/api/v1/jobs/{id}"), None)?;
+            let job = self.get(&format!("/api/v1/jobs/{id}"))?;
             progress(job["progress"].as_f64().unwrap_or(0.0));
             match job["state"].as_str() {
                 Some("succeeded") => return Ok(job),

@@ -1,0 +1,121 @@
+//! The study's curves as PNG (plotters): per algorithm, the mean over its seeds as a line and
+//! ±1 std as a band, at the environment steps every seed reported (runs of one algorithm share
+//! the rollout size, so their iterations line up).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crm_api::Iteration;
+use plotters::prelude::*;
+
+use super::Study;
+
+const FONT: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
+
+/// One algorithm's curve: (steps, mean, std) over its seeds.
+type Band = (String, Vec<(f64, f64, f64)>);
+
+fn bands_of(study: &Study, value: &impl Fn(&Iteration) -> f64) -> Vec<Band> {
+    let mut by_algorithm: Vec<(String, Vec<&Vec<Iteration>>)> = Vec::new();
+    for (algorithm, _, series) in &study.curves {
+        match by_algorithm.iter_mut().find(|(a, _)| a == algorithm) {
+            Some((_, all)) => all.push(series),
+            None => by_algorithm.push((algorithm.clone(), vec![series])),
+        }
+    }
+    by_algorithm
+        .into_iter()
+        .map(|(algorithm, runs)| {
+            let mut at: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+            for series in &runs {
+                for it in series.iter().filter(|it| it.episodes > 0) {
+                    let v = value(it);
+                    if v.is_finite() {
+                        at.entry(it.steps).or_default().push(v);
+                    }
+                }
+            }
+            let points = at
+                .into_iter()
+                .filter(|(_, values)| values.len() == runs.len())
+                .map(|(steps, values)| {
+                    let n = values.len() as f64;
+                    let mean = values.iter().sum::<f64>() / n;
+                    let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+                    (steps as f64, mean, std)
+                })
+                .collect();
+            (algorithm, points)
+        })
+        .collect()
+}
+
+/// Draws every algorithm's band and mean line to `path`.
+pub fn bands(
+    study: &Study,
+    path: &Path,
+    title: &str,
+    value: impl Fn(&Iteration) -> f64,
+) -> anyhow::Result<()> {
+    let curves = bands_of(study, &value);
+    // Registering twice is harmless; plotters keeps the first.
+    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
+        .map_err(|_| anyhow::anyhow!("the bundled font is not a font"))?;
+    let draw = || -> Result<(), Box<dyn std::error::Error>> {
+        let root = BitMapBackend::new(path, (900, 540)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let x_max = curves
+            .iter()
+            .flat_map(|(_, p)| p.iter().map(|p| p.0))
+            .fold(1.0, f64::max);
+        let lo = curves
+            .iter()
+            .flat_map(|(_, p)| p.iter().map(|p| p.1 - p.2))
+            .fold(f64::INFINITY, f64::min)
+            .min(0.0);
+        let hi = curves
+            .iter()
+            .flat_map(|(_, p)| p.iter().map(|p| p.1 + p.2))
+            .fold(f64::NEG_INFINITY, f64::max)
+            .max(lo + 1e-6);
+        let hi = if hi <= 1.0 && lo >= 0.0 { 1.0 } else { hi };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..x_max, lo..hi)?;
+        chart
+            .configure_mesh()
+            .x_desc("environment steps")
+            .label_style(("sans-serif", 14))
+            .draw()?;
+        for (k, (algorithm, points)) in curves.iter().enumerate() {
+            let color = Palette99::pick(k).to_rgba();
+            let band: Vec<(f64, f64)> = points
+                .iter()
+                .map(|p| (p.0, p.1 + p.2))
+                .chain(points.iter().rev().map(|p| (p.0, p.1 - p.2)))
+                .collect();
+            chart.draw_series(std::iter::once(Polygon::new(band, color.mix(0.2).filled())))?;
+            chart
+                .draw_series(LineSeries::new(
+                    points.iter().map(|p| (p.0, p.1)),
+                    color.stroke_width(2),
+                ))?
+                .label(algorithm.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))
+}
