@@ -110,6 +110,18 @@ fn the_dashboard_works_in_chromium() {
     // Without a worker, the job the browser submits stays queued until it cancels it.
     let _ = worker.0.kill();
     let _ = worker.0.wait();
+    // One more worker, kept busy building demonstrations for a long imitation job: the pages
+    // show its phase (the browser cancels it last).
+    let _busy = start_worker(&format!("http://{}", server.grpc), &[]);
+    let phase_job = submit(
+        &addr,
+        &json!({"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 64,
+                "envs": 1, "imitation": {"episodes": 100000, "epochs": 1}}),
+    );
+    support::wait_for(120, "the imitation job's phase", || {
+        let job = get(&addr, &format!("/api/v1/jobs/{phase_job}"));
+        (job["phase"]["name"] == "demonstrations").then_some(())
+    });
 
     let out = Command::new("node")
         .arg(web.join("tests/dashboard.mjs"))
@@ -117,7 +129,7 @@ fn the_dashboard_works_in_chromium() {
         .env("CRM_BASE", format!("http://{addr}"))
         .env(
             "CRM_SEED",
-            json!({"runs": runs, "sweep": sweep}).to_string(),
+            json!({"runs": runs, "sweep": sweep, "phase_job": phase_job}).to_string(),
         )
         .env("CRM_MODEL", models.join("crm-ppo.safetensors"))
         .output()
@@ -129,7 +141,7 @@ fn the_dashboard_works_in_chromium() {
         "browser checks failed:\n{stdout}\n{stderr}"
     );
     assert!(
-        stdout.contains("10 of 10 browser checks passed"),
+        stdout.contains("11 of 11 browser checks passed"),
         "{stdout}"
     );
     println!("{stdout}");

@@ -310,6 +310,20 @@ check('a finished run shows its disk use and can be deleted from its page', asyn
   await shot('deleted');
 });
 
+// Last: it frees the busy worker.
+check('a job building demonstrations shows its phase in the list and on its page', async () => {
+  const id = seed.phase_job;
+  await page.goto(`${base}/`);
+  await page.waitForSelector(`#jobs tr[data-job="${id}"] .progress.phase`);
+  assert.match(await page.textContent(`#jobs tr[data-job="${id}"] .progress`), /demonstrations \d+%/);
+  await page.goto(`${base}/runs/${id}`);
+  await page.waitForSelector('#phase');
+  assert.match(await page.textContent('#phase'), /^demonstrations: [\d,]+ of 100,000$/);
+  await shot('phase');
+  const cancelled = await fetch(`${base}/api/v1/jobs/${id}/cancel`, { method: 'POST' });
+  assert.equal(cancelled.status, 200);
+});
+
 let failed = 0;
 for (const [name, body] of checks) {
   try {
