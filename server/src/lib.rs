@@ -98,6 +98,8 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
             .await
             .with_context(|| format!("registering the models in {}", config.models.display()))?;
         tracing::info!(models = n, dir = %config.models.display(), "shipped models registered");
+    } else if state.store.created() {
+        tracing::info!(dir = %config.models.display(), "no models folder: none registered");
     }
     let http = tokio::net::TcpListener::bind(&config.http)
         .await

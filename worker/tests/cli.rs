@@ -281,7 +281,7 @@ fn the_topology_network_trains_and_predicts_the_benchmark_topology() {
 fn results_writes_table_i_and_png_curves() {
     let dir = std::env::temp_dir().join(format!("crm-cli-results-{}", std::process::id()));
     let out = dir.join("docs");
-    let checkpoints = dir.join("checkpoints");
+    let data = dir.join("data");
     let sac = dir.join("sac.json");
     std::fs::create_dir_all(&dir).expect("dir");
     std::fs::write(
@@ -303,28 +303,28 @@ fn results_writes_table_i_and_png_curves() {
         "crm-sac",
         "--sac-config",
         sac.to_str().expect("path"),
+        "--seeds",
+        "1",
         "--out",
         out.to_str().expect("path"),
-        "--checkpoints",
-        checkpoints.to_str().expect("path"),
+        "--data-dir",
+        data.to_str().expect("path"),
     ]);
     assert_eq!(code, 0, "{stderr}");
     let table = std::fs::read_to_string(out.join("RESULTS.md")).expect("RESULTS.md");
     assert!(
-        table.contains("| objective | crm-ppo | crm-sac |"),
+        table.contains("| objective | crm-ppo | paper | crm-sac | paper |"),
         "{table}"
     );
     assert!(table.contains("| press |"), "{table}");
     assert!(table.contains("| overall |"), "{table}");
-    assert!(
-        table.contains("256 environment steps per algorithm"),
-        "{table}"
-    );
-    for plot in ["success.png", "return.png"] {
+    assert!(table.contains("256 environment steps per run"), "{table}");
+    for plot in ["success.png", "episode_length.png"] {
         let bytes = std::fs::read(out.join("results").join(plot)).expect("plot");
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{plot} is a PNG");
     }
-    assert!(checkpoints.join("crm-sac.safetensors").exists());
+    // Without --coordinator, the study ran on a coordinator started here, with its store.
+    assert!(data.join("crm-grasp.sqlite").exists());
     let (code, _, stderr) = crm(&[
         "results",
         "--steps",

@@ -38,7 +38,14 @@ pub struct CheckpointHeader {
     pub hidden: Vec<usize>,
     /// The training configuration as JSON.
     pub config: serde_json::Value,
+    /// The hidden layers' nonlinearity, written by CRM-SAC (`relu`); absent on PPO-family
+    /// checkpoints (`tanh`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub activation: Option<String>,
 }
+
+/// What CRM-SAC checkpoints say in `activation` (older ones, with `tanh`, say nothing).
+const SAC_ACTIVATION: &str = "relu";
 
 /// Parameters as the (name, tensor) pairs a safetensors file stores.
 fn named(
@@ -71,7 +78,11 @@ impl Checkpoint {
         header: &CheckpointHeader,
         path: &Path,
     ) -> Result<()> {
-        Self::save_normalized(&nets.params, nets.norm(), header, path)
+        let header = CheckpointHeader {
+            activation: Some(SAC_ACTIVATION.into()),
+            ..header.clone()
+        };
+        Self::save_normalized(&nets.params, nets.norm(), &header, path)
     }
 
     /// Writes named parameters with the observation statistics they were trained with.
@@ -269,6 +280,13 @@ impl Checkpoint {
                 format!("a {} checkpoint, not crm-sac", header.algorithm),
             ));
         }
+        if header.activation.as_deref() != Some(SAC_ACTIVATION) {
+            return Err(refuse(
+                path,
+                "a CRM-SAC checkpoint with tanh hidden layers (made before CRM-SAC took \
+                 Stable-Baselines3's ReLU); train it again",
+            ));
+        }
         let mut nets = crate::sac::SacNets::new(header.layout, &header.hidden, 0)?;
         let tensors = Self::fill(&bytes, path, &nets.params)?;
         nets.set_norm(Self::norm_of(&tensors, header.layout, path)?)?;
@@ -291,6 +309,7 @@ mod tests {
             layout: net.layout(),
             hidden: net.hidden().to_vec(),
             config: serde_json::json!({"learning_rate": 3e-5}),
+            activation: None,
         }
     }
 
@@ -402,6 +421,7 @@ mod tests {
             layout,
             hidden: vec![16, 16],
             config: serde_json::json!({}),
+            activation: None,
         };
         let path = temp("sac.safetensors");
         Checkpoint::save_sac(&nets, &header, &path).expect("save");
@@ -414,7 +434,11 @@ mod tests {
         };
         assert_eq!(input(&loaded), input(&nets), "the same normalized input");
         let stale = temp("sac-stale.safetensors");
-        Checkpoint::save_params(&nets.params, &header, &stale).expect("write");
+        let relu = CheckpointHeader {
+            activation: Some(SAC_ACTIVATION.into()),
+            ..header.clone()
+        };
+        Checkpoint::save_params(&nets.params, &relu, &stale).expect("write");
         let err = Checkpoint::load_sac(&stale, "abc123", "grasp-sim/test")
             .err()
             .map(|e| e.to_string())
@@ -423,7 +447,15 @@ mod tests {
             err.contains("no observation-normalizer statistics"),
             "{err}"
         );
-        for p in [path, stale] {
+        // A checkpoint from before CRM-SAC's ReLU layers says nothing of them: refused.
+        let tanh = temp("sac-tanh.safetensors");
+        Checkpoint::save_normalized(&nets.params, nets.norm(), &header, &tanh).expect("write");
+        let err = Checkpoint::load_sac(&tanh, "abc123", "grasp-sim/test")
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("tanh hidden layers"), "{err}");
+        for p in [path, stale, tanh] {
             std::fs::remove_file(p).ok();
         }
     }

@@ -128,12 +128,34 @@ pub(crate) fn mlp_init(
         .collect()
 }
 
+/// The hidden layers' nonlinearity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Activation {
+    /// Stable-Baselines3's PPO default (the PPO learners).
+    Tanh,
+    /// Stable-Baselines3's SAC default (CRM-SAC); also far cheaper than `tanh` on the CPU.
+    Relu,
+}
+
+/// Runs an MLP: `tanh` after every hidden layer.
 pub(crate) fn run(layers: &[Linear], input: &Tensor) -> Result<Tensor> {
+    run_with(layers, input, Activation::Tanh)
+}
+
+/// Runs an MLP with `activation` after every hidden layer.
+pub(crate) fn run_with(
+    layers: &[Linear],
+    input: &Tensor,
+    activation: Activation,
+) -> Result<Tensor> {
     let mut x = input.clone();
     for (k, layer) in layers.iter().enumerate() {
         x = layer.forward(&x)?;
         if k + 1 < layers.len() {
-            x = x.tanh()?;
+            x = match activation {
+                Activation::Tanh => x.tanh()?,
+                Activation::Relu => x.relu()?,
+            };
         }
     }
     Ok(x)

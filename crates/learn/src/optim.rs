@@ -35,6 +35,8 @@ pub struct GradNorms {
 #[derive(Clone, Debug)]
 pub struct Adam {
     pub learning_rate: f64,
+    /// Added to the second moment's root: [`ADAM_EPS`] unless set with [`Adam::with_eps`].
+    eps: f32,
     m: Vec<Vec<f32>>,
     v: Vec<Vec<f32>>,
     t: i32,
@@ -55,9 +57,18 @@ impl Adam {
         };
         Self {
             learning_rate,
+            eps: ADAM_EPS as f32,
             m: zeros(),
             v: zeros(),
             t: 0,
+        }
+    }
+
+    /// The same optimizer with another epsilon (SAC: PyTorch's 1e-8, as Stable-Baselines3).
+    pub fn with_eps(self, eps: f64) -> Self {
+        Self {
+            eps: eps as f32,
+            ..self
         }
     }
 
@@ -119,7 +130,7 @@ impl Adam {
                 let g = grad[i] * g_scale;
                 m[i] = b1 * m[i] + (1.0 - b1) * g;
                 v[i] = b2 * v[i] + (1.0 - b2) * g * g;
-                let denom = v[i].sqrt() / sqrt_correction2 + ADAM_EPS as f32;
+                let denom = v[i].sqrt() / sqrt_correction2 + self.eps;
                 values[i] -= step_size * m[i] / denom;
             }
             var.set(&Tensor::from_vec(values, var.shape(), var.device())?)?;

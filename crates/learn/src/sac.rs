@@ -1,18 +1,24 @@
 //! SAC inside the CRM (the paper's CRM-SAC baseline): a tanh-squashed Gaussian actor with a
 //! state-dependent scale, twin Q critics with Polyak-averaged targets, automatic entropy
-//! temperature, and a replay buffer. The reward is the CRM's (intra-stage plus transition).
+//! temperature, and a replay buffer; ReLU hidden layers, as Stable-Baselines3's SAC (the
+//! authors' library). The reward is the CRM's (intra-stage plus transition).
 //! Dimensions outside the stage's action set are zero in every action, left out of
 //! log-probabilities, and the entropy target counts only the live ones.
 
 use candle_core::{D, Device, Tensor, Var};
-use candle_nn::{AdamW, Linear, Optimizer, ParamsAdamW};
+use candle_nn::Linear;
 use crm_api::SacConfig;
 
 use crate::error::Result;
-use crate::network::{Layout, encode_normalized, mlp, run};
+use crate::layers::{Activation, run_with};
+use crate::network::{Layout, encode_normalized, mlp};
 use crate::noise::Noise;
 use crate::normalize::ObsNorm;
+use crate::optim::Adam;
 use crate::rollout::{Actor, Rollout};
+
+/// Adam's epsilon for SAC: PyTorch's default, which Stable-Baselines3's SAC keeps.
+const SAC_ADAM_EPS: f64 = 1e-8;
 
 const LOG_STD_MIN: f64 = -5.0;
 const LOG_STD_MAX: f64 = 2.0;
@@ -70,20 +76,27 @@ impl SacNets {
         Ok(nets)
     }
 
-    fn vars(&self, prefix: &str) -> Vec<Var> {
+    /// The named parameters of one network (`actor`, `q1`, ...).
+    fn named(&self, prefix: &str) -> Vec<(String, Var)> {
         self.params
             .iter()
             .filter(|(name, _)| name.split('.').next() == Some(prefix))
-            .map(|(_, v)| v.clone())
+            .cloned()
             .collect()
     }
 
-    /// Moves the targets `tau` of the way to the critics.
+    /// Moves the targets `tau` of the way to the critics: `tau * critic + (1 - tau) *
+    /// target`, in one host pass per parameter (the same f32 arithmetic as the tensor form).
     fn polyak(&self, tau: f64) -> Result<()> {
+        let (keep, take) = ((1.0 - tau) as f32, tau as f32);
         for (critic, target) in [("q1", "q1_target"), ("q2", "q2_target")] {
-            for (src, dst) in self.vars(critic).iter().zip(self.vars(target)) {
-                let blended = ((src.as_tensor() * tau)? + (dst.as_tensor() * (1.0 - tau))?)?;
-                dst.set(&blended)?;
+            for ((_, src), (_, dst)) in self.named(critic).iter().zip(self.named(target)) {
+                let src_values = src.as_tensor().flatten_all()?.to_vec1::<f32>()?;
+                let mut values = dst.as_tensor().flatten_all()?.to_vec1::<f32>()?;
+                for (d, s) in values.iter_mut().zip(&src_values) {
+                    *d = *s * take + *d * keep;
+                }
+                dst.set(&Tensor::from_vec(values, dst.shape(), dst.device())?)?;
             }
         }
         Ok(())
@@ -114,7 +127,7 @@ impl SacNets {
 
     /// Pre-squash means and clamped log standard deviations `[batch, actions]` each.
     fn head(&self, input: &Tensor) -> Result<(Tensor, Tensor)> {
-        let out = run(&self.actor, input)?;
+        let out = run_with(&self.actor, input, Activation::Relu)?;
         let n = self.layout.actions;
         let mean = out.narrow(1, 0, n)?;
         let log_std = out.narrow(1, n, n)?.clamp(LOG_STD_MIN, LOG_STD_MAX)?;
@@ -146,12 +159,28 @@ impl SacNets {
     }
 
     fn q(layers: &[Linear], input: &Tensor, action: &Tensor) -> Result<Tensor> {
-        Ok(run(layers, &Tensor::cat(&[input, action], 1)?)?.squeeze(1)?)
+        let input = Tensor::cat(&[input, action], 1)?;
+        Ok(run_with(layers, &input, Activation::Relu)?.squeeze(1)?)
+    }
+
+    /// A critic whose weights are constants to backpropagation: the actor's loss needs the
+    /// gradient through the critic to the action, not the critic's own.
+    fn frozen(layers: &[Linear]) -> Vec<Linear> {
+        layers
+            .iter()
+            .map(|l| Linear::new(l.weight().detach(), l.bias().map(Tensor::detach)))
+            .collect()
     }
 
     /// `min(Q1, Q2)` of an action: `[batch]`.
     pub fn min_q(&self, input: &Tensor, action: &Tensor) -> Result<Tensor> {
         Ok(Self::q(&self.q1, input, action)?.minimum(&Self::q(&self.q2, input, action)?)?)
+    }
+
+    /// [`Self::min_q`] with the critics' weights held constant.
+    fn frozen_min_q(&self, input: &Tensor, action: &Tensor) -> Result<Tensor> {
+        let (q1, q2) = (Self::frozen(&self.q1), Self::frozen(&self.q2));
+        Ok(Self::q(&q1, input, action)?.minimum(&Self::q(&q2, input, action)?)?)
     }
 
     pub fn alpha(&self) -> Result<f32> {
@@ -187,9 +216,11 @@ pub struct SacStats {
 pub struct Sac {
     pub nets: SacNets,
     pub config: SacConfig,
-    actor_opt: AdamW,
-    critic_opt: AdamW,
-    alpha_opt: AdamW,
+    /// One fused Adam per loss, with the parameters it updates (no gradient clipping, as
+    /// Stable-Baselines3's SAC).
+    actor_opt: (Adam, Vec<(String, Var)>),
+    critic_opt: (Adam, Vec<(String, Var)>),
+    alpha_opt: (Adam, Vec<(String, Var)>),
     buffer: Vec<Stored>,
     next_slot: usize,
     seen: usize,
@@ -208,22 +239,16 @@ impl Sac {
     ) -> Result<Self> {
         config.validate()?;
         let nets = SacNets::new(layout, &config.hidden, seed)?;
-        let adam = |vars: Vec<Var>| {
-            AdamW::new(
-                vars,
-                ParamsAdamW {
-                    lr: config.learning_rate,
-                    weight_decay: 0.0,
-                    ..ParamsAdamW::default()
-                },
-            )
+        let adam = |params: Vec<(String, Var)>| {
+            let adam = Adam::new(&params, config.learning_rate).with_eps(SAC_ADAM_EPS);
+            (adam, params)
         };
-        let mut critic_vars = nets.vars("q1");
-        critic_vars.extend(nets.vars("q2"));
+        let mut critics = nets.named("q1");
+        critics.extend(nets.named("q2"));
         Ok(Self {
-            actor_opt: adam(nets.vars("actor"))?,
-            critic_opt: adam(critic_vars)?,
-            alpha_opt: adam(vec![nets.log_alpha.clone()])?,
+            actor_opt: adam(nets.named("actor")),
+            critic_opt: adam(critics),
+            alpha_opt: adam(nets.named("log_alpha")),
             nets,
             config,
             buffer: Vec::new(),
@@ -311,6 +336,13 @@ impl Sac {
         Ok(stats)
     }
 
+    /// One Adam step of `loss` on the optimizer's parameters.
+    fn descend(opt: &mut (Adam, Vec<(String, Var)>), loss: &Tensor) -> Result<()> {
+        let grads = loss.backward()?;
+        opt.0.step(&opt.1, &grads, f32::INFINITY)?;
+        Ok(())
+    }
+
     fn step(&mut self) -> Result<SacStats> {
         let batch = self.config.batch_size.min(self.buffer.len());
         let picks: Vec<usize> = (0..batch)
@@ -357,14 +389,15 @@ impl Sac {
         let q2 = SacNets::q(&self.nets.q2, &input, &actions)?;
         let critic_loss =
             ((q1 - &target)?.sqr()?.mean_all()? + (q2 - &target)?.sqr()?.mean_all()?)?;
-        self.critic_opt.backward_step(&critic_loss)?;
+        Self::descend(&mut self.critic_opt, &critic_loss)?;
 
         // Actor: minimize alpha * log pi(a|s) - min Q(s, a) with a reparameterized sample.
         let eps = self.normals(batch)?;
         let (action, log_prob) = self.nets.sample(&input, &masks, &eps)?;
-        let actor_loss =
-            (log_prob.broadcast_mul(&alpha)? - self.nets.min_q(&input, &action)?)?.mean_all()?;
-        self.actor_opt.backward_step(&actor_loss)?;
+        let actor_loss = (log_prob.broadcast_mul(&alpha)?
+            - self.nets.frozen_min_q(&input, &action)?)?
+        .mean_all()?;
+        Self::descend(&mut self.actor_opt, &actor_loss)?;
 
         // Temperature: keep the entropy near the target for the live dimensions.
         let live = masks.sum(D::Minus1)?;
@@ -372,7 +405,7 @@ impl Sac {
         let gap = (log_prob.detach() + target_entropy)?;
         let alpha_loss =
             (self.nets.log_alpha.as_tensor().broadcast_mul(&gap)? * -1.0)?.mean_all()?;
-        self.alpha_opt.backward_step(&alpha_loss)?;
+        Self::descend(&mut self.alpha_opt, &alpha_loss)?;
         self.nets.polyak(f64::from(self.config.tau as f32))?;
         Ok(SacStats {
             critic_loss: critic_loss.to_scalar::<f32>()?,

@@ -237,6 +237,17 @@ fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
     Ok(Some(key.to_string()))
 }
 
+/// A request's JSON body, or the error naming `body` (over the size limit: 413).
+pub(super) fn json_body(body: Result<Bytes, BytesRejection>) -> Result<Value, ApiError> {
+    let body = body.map_err(|e| ApiError {
+        status: e.status(),
+        code: "bad_body",
+        message: e.body_text(),
+        field: Some("body".into()),
+    })?;
+    serde_json::from_slice(&body).map_err(|e| ApiError::invalid("body", format!("not JSON: {e}")))
+}
+
 /// Submits a job. With an `Idempotency-Key` header, a retry with the same key and the same
 /// request (compared after validation, so defaults written out or left out are the same
 /// request) answers with the job the first submit created, in its current state, and the
@@ -247,14 +258,7 @@ pub async fn create(
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ApiError> {
     let key = idempotency_key(&headers)?;
-    let body = body.map_err(|e| ApiError {
-        status: e.status(),
-        code: "bad_body",
-        message: e.body_text(),
-        field: Some("body".into()),
-    })?;
-    let value: Value = serde_json::from_slice(&body)
-        .map_err(|e| ApiError::invalid("body", format!("not JSON: {e}")))?;
+    let value = json_body(body)?;
     let submission = validate(&state, value).await?;
     let new = NewJob {
         kind: submission.kind,

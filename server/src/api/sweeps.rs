@@ -16,7 +16,7 @@ use axum::response::{IntoResponse, Response};
 use serde_json::{Map, Value, json};
 
 use super::error::{ApiError, parse_id};
-use super::jobs::{Submission, eval_spec, label, validate};
+use super::jobs::{Submission, eval_spec, json_body, label, validate};
 use super::table;
 use crate::AppState;
 use crate::store::NewJob;
@@ -233,14 +233,7 @@ pub async fn create(
     State(state): State<Arc<AppState>>,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ApiError> {
-    let body = body.map_err(|e| ApiError {
-        status: e.status(),
-        code: "bad_body",
-        message: e.body_text(),
-        field: Some("body".into()),
-    })?;
-    let value: Value = serde_json::from_slice(&body)
-        .map_err(|e| ApiError::invalid("body", format!("not JSON: {e}")))?;
+    let value = json_body(body)?;
     let plan = plan(&state, value).await?;
     let jobs: Vec<NewJob> = plan
         .jobs

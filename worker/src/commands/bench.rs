@@ -42,6 +42,9 @@ pub struct LearnBenchArgs {
     pub envs: Option<usize>,
     #[arg(long)]
     pub json: bool,
+    /// CRM-SAC gradient steps to time (batch 256).
+    #[arg(long, default_value_t = 20)]
+    pub sac_steps: usize,
 }
 
 #[derive(Serialize)]
@@ -256,7 +259,7 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
         1,
     )?;
     sac.store(&rollout);
-    let sac_steps = 20;
+    let sac_steps = args.sac_steps.max(1);
     let start = Instant::now();
     sac.update(sac_steps)?;
     let sac_secs = start.elapsed().as_secs_f64();

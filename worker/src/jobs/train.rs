@@ -317,6 +317,8 @@ impl Trainer {
                 Learner::Ppo(_) => serde_json::to_value(&self.spec.config)?,
                 Learner::Sac(_) => serde_json::to_value(&self.spec.sac)?,
             },
+            // `Checkpoint::save_sac` writes CRM-SAC's.
+            activation: None,
         };
         // Write beside and rename, so a reader never sees half a checkpoint.
         let partial = path.with_extension("safetensors.partial");
