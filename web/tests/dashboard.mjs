@@ -106,9 +106,10 @@ check('the form shows API errors next to the field, then queues a job that appea
   await page.click('#submit-job button[type=submit]');
   const ok = await page.waitForSelector('.message .ok');
   const id = Number((await ok.textContent()).match(/Job (\d+) queued/)[1]);
-  const row = await page.waitForSelector(`#jobs tr[data-job="${id}"]`);
-  assert.equal(await row.getAttribute('data-state'), 'queued');
-  assert.match(await row.textContent(), /valve-twist/);
+  const row = `#jobs tr[data-job="${id}"]`;
+  await page.waitForSelector(row);
+  assert.equal(await page.getAttribute(row, 'data-state'), 'queued');
+  assert.match(await page.textContent(row), /valve-twist/);
   const stored = await api(`/api/v1/jobs/${id}`);
   assert.equal(stored.spec.steps, 3000);
   assert.deepEqual(stored.spec.tasks, ['valve-twist']);
@@ -117,8 +118,9 @@ check('the form shows API errors next to the field, then queues a job that appea
   assert.equal(stored.spec.objective, 'learned');
   assert.equal(stored.spec.curriculum, true);
 
-  // Cancel it from its row; the list follows.
-  await row.$('button:has-text("Cancel")').then((b) => b.click());
+  // Cancel it from its row; the list follows. (A selector, not the row's handle: live updates
+  // redraw the list while a worker reports.)
+  await page.click(`#jobs tr[data-job="${id}"] button:has-text("Cancel")`);
   await page.waitForSelector(`#jobs tr[data-job="${id}"][data-state="cancelled"]`);
 });
 

@@ -170,6 +170,17 @@ async fn plan(state: &AppState, body: Value) -> Result<Plan, ApiError> {
                 "must list at least one value",
             ));
         }
+        // Over the grid's limit on its own: refused before the repeat check (quadratic).
+        if values.len() > state.config.max_sweep_jobs {
+            return Err(ApiError::invalid(
+                "axes",
+                format!(
+                    "axes.{key} alone has {} values; a sweep may have at most {} jobs (--max-sweep-jobs)",
+                    values.len(),
+                    state.config.max_sweep_jobs
+                ),
+            ));
+        }
         if let Some(k) = (1..values.len()).find(|&k| values[..k].contains(&values[k])) {
             return Err(ApiError::invalid(
                 format!("axes.{key}[{k}]"),
