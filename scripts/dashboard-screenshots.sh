@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The dashboard screenshots in docs/dashboard/: starts `crm up` on a temporary data folder,
-# trains a small experiment through the REST API (CRM-PPO with three seeds, LPPO with two,
-# IPPO with one, on mouse-press; about ten minutes on two cores), evaluates every run and one
-# checkpoint under each forced topology, then photographs each page in headless Chromium
+# The dashboard screenshots in docs/dashboard/: starts `crm up` on a temporary data folder
+# (which registers the shipped model), trains a small experiment through the REST API as one
+# sweep (CRM-PPO, LPPO and IPPO, two seeds each, on mouse-press; every final checkpoint
+# evaluated; about ten minutes on two cores), evaluates one checkpoint under each forced
+# topology and the shipped model once, then photographs each page in headless Chromium
 # (`web/tests/screenshots.mjs`). Needs what the browser test needs (`npm ci --prefix web`,
 # Debian's chromium).
 #   bash scripts/dashboard-screenshots.sh [steps] [out-dir]
@@ -31,24 +32,21 @@ wait_all() { # ids...
         done
     done
 }
-runs=()
-for spec in "crm-ppo 0" "crm-ppo 1" "crm-ppo 2" "lppo 0" "lppo 1" "ippo 0"; do
-    set -- $spec
-    record=""
-    [ "$1 $2" = "crm-ppo 0" ] && record=', "record": {"every": 25, "max_episodes": 4}'
-    runs+=("$(submit "{\"kind\": \"train\", \"algorithm\": \"$1\", \"seed\": $2, \"task\": \"mouse-press\", \"steps\": $steps, \"envs\": 2, \"config\": {\"learning_rate\": 0.0003, \"rollout_steps\": 2048}$record}")")
+sweep=$(curl -sf -X POST "$base/api/v1/sweeps" -H 'content-type: application/json' -d "{\"name\": \"mouse-press, three algorithms\", \"base\": {\"task\": \"mouse-press\", \"steps\": $steps, \"envs\": 2, \"config\": {\"learning_rate\": 0.0003, \"rollout_steps\": 2048}}, \"axes\": {\"algorithm\": [\"crm-ppo\", \"lppo\", \"ippo\"], \"seed\": [0, 1]}, \"eval\": {\"episodes\": 60, \"tasks\": [\"mouse-press\", \"stapler-press\", \"dispenser-press\", \"valve-twist\"]}}" | python3 -c 'import json, sys; print(json.load(sys.stdin)["sweep"]["id"])')
+while :; do
+    fraction=$(curl -sf "$base/api/v1/sweeps/$sweep" | python3 -c 'import json, sys; print(json.load(sys.stdin)["progress"]["fraction"])')
+    [ "$fraction" = "1.0" ] && break
+    sleep 5
 done
-wait_all "${runs[@]}"
+mapfile -t runs < <(curl -sf "$base/api/v1/sweeps/$sweep" | python3 -c 'import json, sys; [print(j["id"]) for j in json.load(sys.stdin)["jobs"] if j["kind"] == "train"]')
 evals=()
-for id in "${runs[@]}"; do
-    checkpoint=$(curl -sf "$base/api/v1/jobs/$id" | python3 -c 'import json, sys; print(json.load(sys.stdin)["result"]["checkpoint_id"])')
-    evals+=("$(submit "{\"kind\": \"eval\", \"checkpoint_id\": $checkpoint, \"episodes\": 60, \"tasks\": [\"mouse-press\", \"stapler-press\", \"dispenser-press\", \"valve-twist\"]}")")
-done
 first=$(curl -sf "$base/api/v1/jobs/${runs[0]}" | python3 -c 'import json, sys; print(json.load(sys.stdin)["result"]["checkpoint_id"])')
 for topology in task auto InSiAd2 pPdAb2 pPdAb23 pPdAb25 platform poPmAb25; do
     evals+=("$(submit "{\"kind\": \"eval\", \"checkpoint_id\": $first, \"episodes\": 40, \"tasks\": [\"mouse-press\", \"stapler-press\", \"valve-twist\", \"bottle-lift\"], \"topology\": \"$topology\", \"seed\": 1}")")
 done
+model=$(curl -sf "$base/api/v1/checkpoints?uploaded=true" | python3 -c 'import json, sys; print(json.load(sys.stdin)["checkpoints"][0]["id"])')
+evals+=("$(submit "{\"kind\": \"eval\", \"checkpoint_id\": $model, \"episodes\": 100, \"seed\": 2}")")
 wait_all "${evals[@]}"
 mkdir -p "$out"
-node web/tests/screenshots.mjs "$base" "$out" "$(IFS=,; echo "${runs[*]}")"
+node web/tests/screenshots.mjs "$base" "$out" "$(IFS=,; echo "${runs[*]}")" "$sweep"
 echo "screenshots in $out"

@@ -1,8 +1,8 @@
 // Photographs each dashboard page for the docs (scripts/dashboard-screenshots.sh seeds the
-// data): node tests/screenshots.mjs BASE OUT-DIR RUN,RUN,...
+// data): node tests/screenshots.mjs BASE OUT-DIR RUN,RUN,... SWEEP
 import { chromium } from 'playwright-core';
 
-const [base, out, runList] = process.argv.slice(2);
+const [base, out, runList, sweep] = process.argv.slice(2);
 const runs = runList.split(',');
 const browser = await chromium.launch({
   executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
@@ -28,6 +28,16 @@ const most = topology.checkpoints.sort((a, b) => b.forced_evaluations - a.forced
 await page.goto(`${base}/topology${most ? `?checkpoint_id=${most.checkpoint_id}` : ''}`);
 await page.waitForSelector('#heatmap');
 await page.screenshot({ path: `${out}/topology.png`, fullPage: true });
+if (sweep) {
+  await page.goto(`${base}/sweeps/${sweep}`);
+  await page.waitForSelector('#sweep-table tbody tr');
+  await drawn();
+  await page.screenshot({ path: `${out}/sweep.png`, fullPage: true });
+}
+await page.goto(`${base}/models`);
+await page.waitForSelector('#models tr[data-checkpoint]');
+await page.waitForSelector('#evaluations tbody tr');
+await page.screenshot({ path: `${out}/models.png`, fullPage: true });
 await page.goto(`${base}/runs/999999`);
 await page.waitForSelector('.not-found');
 await page.screenshot({ path: `${out}/not-found.png` });
