@@ -124,7 +124,7 @@ impl Store {
     /// that is the job's final checkpoint or that an evaluation job names. Rows go first, in
     /// one transaction, then their files; returns how many were removed.
     pub async fn prune_checkpoints(&self, job: i64, keep: u32) -> Result<usize> {
-        let mut tx = self.pool.begin().await?;
+        let mut tx = self.write_tx().await?;
         let old: Vec<(i64, String)> = sqlx::query_as(
             "SELECT id, file FROM checkpoints WHERE job_id = ?1 \
              AND id NOT IN (SELECT id FROM checkpoints WHERE job_id = ?1 ORDER BY id DESC LIMIT ?2) \

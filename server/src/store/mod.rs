@@ -13,6 +13,8 @@ use sqlx::{ConnectOptions, Connection, FromRow, SqlitePool};
 mod checkpoints;
 mod recordings;
 mod sweeps;
+#[cfg(test)]
+mod tests;
 
 pub use checkpoints::{CheckpointRow, NewCheckpoint};
 pub use recordings::RecordingRow;
@@ -173,6 +175,14 @@ impl Store {
         })
     }
 
+    /// A write transaction. `BEGIN IMMEDIATE` takes the write lock first (waiting up to the
+    /// busy timeout): with sqlx's plain deferred `BEGIN`, a transaction that reads before it
+    /// writes fails with SQLITE_BUSY_SNAPSHOT (517, "database is locked", which no timeout
+    /// waits out) when another connection commits in between, as a worker's progress does.
+    async fn write_tx(&self) -> Result<sqlx::Transaction<'static, sqlx::Sqlite>> {
+        Ok(self.pool.begin_with("BEGIN IMMEDIATE").await?)
+    }
+
     /// Whether this store was created by `open` (a new data folder).
     pub fn created(&self) -> bool {
         self.created
@@ -252,7 +262,7 @@ impl Store {
         if let Some(found) = self.keyed_job(key, request).await? {
             return Ok((found, false));
         }
-        let mut tx = self.pool.begin().await?;
+        let mut tx = self.write_tx().await?;
         let id = insert_job(&mut *tx, &job).await?;
         let keyed = sqlx::query(
             "INSERT INTO idempotency_keys (key, request, job_id, created_at) VALUES (?, ?, ?, ?)",
@@ -386,7 +396,7 @@ impl Store {
     /// Records a training iteration (replacing one at the same step after a resume).
     pub async fn add_metric(&self, job: i64, it: &crm_api::Iteration, progress: f64) -> Result<()> {
         let data = serde_json::to_string(it).unwrap_or_default();
-        let mut tx = self.pool.begin().await?;
+        let mut tx = self.write_tx().await?;
         sqlx::query("INSERT OR REPLACE INTO metrics (job_id, steps, iteration, wall_s, data) VALUES (?, ?, ?, ?, ?)")
             .bind(job).bind(it.steps as i64).bind(it.iteration as i64).bind(it.wall_s).bind(data)
             .execute(&mut *tx)
@@ -470,7 +480,7 @@ impl Store {
         result: Option<&str>,
         error: Option<&str>,
     ) -> Result<()> {
-        let mut tx = self.pool.begin().await?;
+        let mut tx = self.write_tx().await?;
         finish_row(&mut tx, worker, job, state, result, error).await?;
         tx.commit().await?;
         Ok(())
@@ -482,7 +492,7 @@ impl Store {
     /// conflict and nothing changes. Rows go in one transaction, then the files; returns the
     /// bytes freed.
     pub async fn delete_run(&self, id: i64) -> Result<u64> {
-        let mut tx = self.pool.begin().await?;
+        let mut tx = self.write_tx().await?;
         let state: Option<String> = sqlx::query_scalar("SELECT state FROM jobs WHERE id = ?")
             .bind(id)
             .fetch_optional(&mut *tx)

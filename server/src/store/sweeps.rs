@@ -29,7 +29,7 @@ impl Store {
         spec: &str,
         jobs: &[NewJob<'_>],
     ) -> Result<SweepRow> {
-        let mut tx = self.pool.begin().await?;
+        let mut tx = self.write_tx().await?;
         let id: i64 = sqlx::query_scalar(
             "INSERT INTO sweeps (name, spec, created_at) VALUES (?, ?, ?) RETURNING id",
         )
@@ -92,7 +92,7 @@ impl Store {
     /// whose request has an evaluation spec queues the evaluation of its final checkpoint
     /// (`result.checkpoint_id`) in the same transaction; returns that job's id.
     pub async fn succeed(&self, worker: &str, job: i64, result: &str) -> Result<Option<i64>> {
-        let mut tx = self.pool.begin().await?;
+        let mut tx = self.write_tx().await?;
         finish_row(&mut tx, worker, job, "succeeded", Some(result), None).await?;
         let (kind, sweep): (String, Option<i64>) =
             sqlx::query_as("SELECT kind, sweep_id FROM jobs WHERE id = ?")
