@@ -172,15 +172,24 @@ impl SacNets {
             .collect()
     }
 
+    /// The smaller of two critics' values of an action: `[batch]`.
+    fn min_of(q1: &[Linear], q2: &[Linear], input: &Tensor, action: &Tensor) -> Result<Tensor> {
+        Ok(Self::q(q1, input, action)?.minimum(&Self::q(q2, input, action)?)?)
+    }
+
     /// `min(Q1, Q2)` of an action: `[batch]`.
     pub fn min_q(&self, input: &Tensor, action: &Tensor) -> Result<Tensor> {
-        Ok(Self::q(&self.q1, input, action)?.minimum(&Self::q(&self.q2, input, action)?)?)
+        Self::min_of(&self.q1, &self.q2, input, action)
     }
 
     /// [`Self::min_q`] with the critics' weights held constant.
     fn frozen_min_q(&self, input: &Tensor, action: &Tensor) -> Result<Tensor> {
-        let (q1, q2) = (Self::frozen(&self.q1), Self::frozen(&self.q2));
-        Ok(Self::q(&q1, input, action)?.minimum(&Self::q(&q2, input, action)?)?)
+        Self::min_of(
+            &Self::frozen(&self.q1),
+            &Self::frozen(&self.q2),
+            input,
+            action,
+        )
     }
 
     pub fn alpha(&self) -> Result<f32> {
@@ -379,8 +388,11 @@ impl Sac {
         // Critics: y = r + gamma * alive * (min Q_target(s', a') - alpha * log pi(a'|s')).
         let eps = self.normals(batch)?;
         let (next_action, next_log_prob) = self.nets.sample(&next_input, &next_masks, &eps)?;
-        let next_q = SacNets::q(&self.nets.q1_target, &next_input, &next_action)?.minimum(
-            &SacNets::q(&self.nets.q2_target, &next_input, &next_action)?,
+        let next_q = SacNets::min_of(
+            &self.nets.q1_target,
+            &self.nets.q2_target,
+            &next_input,
+            &next_action,
         )?;
         let soft = (next_q - next_log_prob.broadcast_mul(&alpha)?)?;
         let target =

@@ -28,9 +28,8 @@ pub fn mean_std(values: &[f64]) -> Value {
     json!({"mean": mean, "std": var.sqrt(), "n": values.len()})
 }
 
-fn json_of(text: &Option<String>) -> Value {
-    text.as_deref()
-        .and_then(|t| serde_json::from_str(t).ok())
+fn json_of(text: Option<&str>) -> Value {
+    text.and_then(|t| serde_json::from_str(t).ok())
         .unwrap_or(Value::Null)
 }
 
@@ -38,6 +37,9 @@ fn json_of(text: &Option<String>) -> Value {
 fn at<'a>(spec: &'a Value, path: &str) -> &'a Value {
     path.split('.').fold(spec, |v, key| &v[key])
 }
+
+/// A training run with its spec, parsed once.
+type RunSpec<'a> = (&'a Job, Value);
 
 pub fn summary(sweep: &Value, jobs: &[Job]) -> Summary {
     let axes: Vec<String> = sweep["axes"]
@@ -67,9 +69,9 @@ pub fn summary(sweep: &Value, jobs: &[Job]) -> Summary {
     });
 
     // Rows in the order their configuration first appears (the grid's order).
-    let mut rows: Vec<(Map<String, Value>, Vec<&Job>)> = Vec::new();
+    let mut rows: Vec<(Map<String, Value>, Vec<RunSpec>)> = Vec::new();
     for run in &train {
-        let spec = json_of(&Some(run.spec.clone()));
+        let spec = json_of(Some(&run.spec));
         let mut config = Map::new();
         for key in &axes {
             let value = if key == "algorithm" {
@@ -80,8 +82,8 @@ pub fn summary(sweep: &Value, jobs: &[Job]) -> Summary {
             config.insert(key.clone(), value);
         }
         match rows.iter_mut().find(|(c, _)| *c == config) {
-            Some((_, runs)) => runs.push(run),
-            None => rows.push((config, vec![run])),
+            Some((_, runs)) => runs.push((*run, spec)),
+            None => rows.push((config, vec![(*run, spec)])),
         }
     }
     let mut objectives = BTreeSet::new();
@@ -90,7 +92,7 @@ pub fn summary(sweep: &Value, jobs: &[Job]) -> Summary {
         .map(|(config, runs)| {
             let reports: Vec<Value> = runs
                 .iter()
-                .filter_map(|run| report_of(run, jobs))
+                .filter_map(|(run, _)| report_of(run, jobs))
                 .collect();
             for report in &reports {
                 if let Some(per) = report["per_objective"].as_object() {
@@ -99,9 +101,11 @@ pub fn summary(sweep: &Value, jobs: &[Job]) -> Summary {
             }
             let stopped: Vec<i64> = runs
                 .iter()
-                .filter_map(|run| {
-                    let result = json_of(&run.result);
-                    (result["stopped_early"] == true).then(|| result["steps"].as_i64()).flatten()
+                .filter_map(|(run, _)| {
+                    let result = json_of(run.result.as_deref());
+                    (result["stopped_early"] == true)
+                        .then(|| result["steps"].as_i64())
+                        .flatten()
                 })
                 .collect();
             let label = config
@@ -115,8 +119,8 @@ pub fn summary(sweep: &Value, jobs: &[Job]) -> Summary {
             json!({
                 "config": config,
                 "label": if label.is_empty() { "all runs".to_string() } else { label },
-                "runs": runs.iter().map(|r| r.id).collect::<Vec<_>>(),
-                "seeds": runs.iter().map(|r| at(&json_of(&Some(r.spec.clone())), "seed").clone()).collect::<Vec<_>>(),
+                "runs": runs.iter().map(|(r, _)| r.id).collect::<Vec<_>>(),
+                "seeds": runs.iter().map(|(_, spec)| spec["seed"].clone()).collect::<Vec<_>>(),
                 "evaluated": reports.len(),
                 "reports": reports,
                 "early_stop": {"runs": stopped.len(), "steps": stopped},
@@ -161,11 +165,11 @@ pub fn summary(sweep: &Value, jobs: &[Job]) -> Summary {
 /// The report of the sweep's finished evaluation of `run`'s final checkpoint (the newest
 /// one, if it was evaluated more than once).
 fn report_of(run: &Job, jobs: &[Job]) -> Option<Value> {
-    let checkpoint = json_of(&run.result)["checkpoint_id"].as_i64()?;
+    let checkpoint = json_of(run.result.as_deref())["checkpoint_id"].as_i64()?;
     jobs.iter()
         .rev()
         .find(|j| j.kind == "eval" && j.state == "succeeded" && j.checkpoint_id == Some(checkpoint))
-        .map(|j| json_of(&j.result))
+        .map(|j| json_of(j.result.as_deref()))
 }
 
 #[cfg(test)]

@@ -69,12 +69,10 @@ impl Store {
         )
     }
 
-    /// Records an upload, or returns the upload with the same hash: `(row, created)`. Two
-    /// uploads of the same bytes at once both end with the one row (the unique index decides).
+    /// Records an upload, or returns the upload with the same hash: `(row, created)`. The
+    /// unique index on uploads' hashes decides, so two uploads of the same bytes at once both
+    /// end with the one row.
     pub async fn add_upload(&self, new: &NewCheckpoint<'_>) -> Result<(CheckpointRow, bool)> {
-        if let Some(row) = self.upload_by_hash(new.sha256).await? {
-            return Ok((row, false));
-        }
         match self.add_checkpoint(new).await {
             Ok(row) => Ok((row, true)),
             Err(StoreError::Sql(sqlx::Error::Database(e))) if e.is_unique_violation() => self
