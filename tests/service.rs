@@ -68,6 +68,22 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
     let result = &evaluated["result"];
     assert_eq!(result["episodes"], 3);
     assert_eq!(result["per_objective"]["press"]["episodes"], 3);
+    // Per task too, and every episode's ending (a failure with its cause) is counted.
+    assert_eq!(result["per_task"]["mouse-press"]["episodes"], 3);
+    assert_eq!(
+        result["per_task"]["mouse-press"]["success_rate"],
+        result["per_objective"]["press"]["success_rate"]
+    );
+    let ended: u64 = result["outcomes"]
+        .as_object()
+        .expect("outcomes")
+        .iter()
+        .map(|(outcome, n)| {
+            assert!(outcome != "failure", "a failure names its cause: {outcome}");
+            n.as_u64().expect("count")
+        })
+        .sum();
+    assert_eq!(ended, 3);
     assert!(result["success_rate"].as_f64().is_some());
     // The paper's protocol is the default; the report says so and gives simulated time.
     assert_eq!(result["objective"], "scripted");

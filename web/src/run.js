@@ -163,15 +163,26 @@ export function evaluationTable(evaluations) {
   const reports = evaluations.map((e) => (e.result && e.result.per_objective ? e.result : null));
   const objectives = [...new Set(reports.flatMap((r) => (r ? Object.keys(r.per_objective) : [])))].sort();
   return el('table', { id: 'evaluations' },
-    el('thead', {}, el('tr', {}, ['id', 'checkpoint', 'state', 'tasks', 'topology', 'episodes', 'overall', ...objectives].map((h) => el('th', {}, h)))),
+    el('thead', {}, el('tr', {}, ['id', 'checkpoint', 'state', 'tasks', 'topology', 'episodes', 'overall', ...objectives, 'outcomes', 'per task'].map((h) => el('th', {}, h)))),
     el('tbody', {}, evaluations.map((e, k) => {
       const r = reports[k];
       const spec = asObject(e.spec);
       return el('tr', {}, el('td', {}, e.id), el('td', {}, e.checkpoint_id), el('td', {}, badge(e.state)),
         el('td', { class: 'tasks' }, tasksOf(e)), el('td', {}, spec.topology || 'task'),
         el('td', {}, r ? r.episodes : ''), el('td', {}, r ? fmtNum(r.success_rate) : ''),
-        objectives.map((o) => el('td', {}, r && r.per_objective[o] ? fmtNum(r.per_objective[o].success_rate) : '')));
+        objectives.map((o) => el('td', {}, r && r.per_objective[o] ? fmtNum(r.per_objective[o].success_rate) : '')),
+        el('td', { class: 'outcomes' }, r && r.outcomes ? Object.entries(r.outcomes).map(([k, n]) => `${k} ${n}`).join(', ') : ''),
+        el('td', {}, r ? perTask(r.per_task) : ''));
     })));
+}
+
+/** An evaluation's success per task, the weakest first, folded away. */
+function perTask(perTaskRows) {
+  const tasks = Object.entries(perTaskRows || {}).sort((a, b) => a[1].success_rate - b[1].success_rate || a[0].localeCompare(b[0]));
+  if (!tasks.length) return '';
+  return el('details', { class: 'per-task' },
+    el('summary', {}, `${tasks.length} task${tasks.length === 1 ? '' : 's'}`),
+    el('ul', {}, tasks.map(([task, row]) => el('li', { 'data-task': task }, `${task} ${fmtNum(row.success_rate)} (${row.episodes})`))));
 }
 
 function episodeList(episodes) {

@@ -134,6 +134,14 @@ check('a run page draws its curves, lists checkpoints and evaluations', async ()
   const download = await fetch(`${base}${href}`);
   assert.equal(download.status, 200);
   assert.ok((await page.$$('#evaluations tbody tr')).length >= 1, 'an evaluation row');
+  // A finished evaluation lists its success per task and how its episodes ended.
+  const runData = await api(`/api/v1/runs/${runA}`);
+  const done = runData.evaluations.find((e) => e.result && Object.keys(e.result.per_task || {}).length);
+  assert.ok(done, 'an evaluation with per-task results');
+  const [task, row] = Object.entries(done.result.per_task)[0];
+  const item = await page.textContent(`#evaluations li[data-task="${task}"]`);
+  assert.ok(item.includes(`${task} ${row.success_rate.toFixed(2)}`), item);
+  assert.ok((await page.textContent('#evaluations td.outcomes')).length > 0, 'outcomes shown');
   // Run a records every episode: the section offers the file and the viewer command.
   await page.waitForSelector('#recording a[href$="/recording"]');
   assert.match(await page.textContent('#recording'), new RegExp(`rerun http://.*/api/v1/jobs/${runA}/recording`));

@@ -241,7 +241,12 @@ pub struct EvalReport {
     #[serde(default)]
     pub deterministic: bool,
     pub per_objective: BTreeMap<String, Row>,
-    /// How the episodes ended: the terminal stage reached, or `truncated` at the time limit.
+    /// The same per task (by id). Empty in reports made before 2026-11-23.
+    #[serde(default)]
+    pub per_task: BTreeMap<String, Row>,
+    /// How the episodes ended: the terminal stage reached (a failure with its cause:
+    /// `failure (dropped)`, `failure (crushed)`, `failure (timeout)`), or `truncated` at the
+    /// time limit.
     #[serde(default)]
     pub outcomes: BTreeMap<String, u64>,
 }
@@ -275,6 +280,23 @@ impl EvalReport {
             "| overall | {:.2} | {:.1} | {:.1} |\n",
             self.success_rate, self.mean_episode_length, self.mean_sim_seconds
         ));
+        if self.per_task.len() > 1 {
+            text.push_str("\n| task | success | episodes | episode length | simulated s |\n| --- | --- | --- | --- | --- |\n");
+            for (task, r) in &self.per_task {
+                text.push_str(&format!(
+                    "| {task} | {:.2} | {} | {:.1} | {:.1} |\n",
+                    r.success_rate, r.episodes, r.mean_episode_length, r.mean_sim_seconds
+                ));
+            }
+        }
+        if !self.outcomes.is_empty() {
+            let outcomes: Vec<String> = self
+                .outcomes
+                .iter()
+                .map(|(outcome, n)| format!("{outcome}: {n}"))
+                .collect();
+            text.push_str(&format!("\nOutcomes: {}.\n", outcomes.join(", ")));
+        }
         text
     }
 }

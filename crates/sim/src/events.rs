@@ -57,6 +57,17 @@ pub enum FailCause {
     Crushed,
 }
 
+impl FailCause {
+    /// The cause's name in reports (`failure (dropped)`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Timeout => "timeout",
+            Self::Dropped => "dropped",
+            Self::Crushed => "crushed",
+        }
+    }
+}
+
 impl Judge {
     pub fn new(task: &Task, force_limit: f32, anchored: bool, config: &SimConfig) -> Self {
         Self {

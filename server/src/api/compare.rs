@@ -372,6 +372,7 @@ mod tests {
             objective: Default::default(),
             deterministic: false,
             per_objective: BTreeMap::new(),
+            per_task: BTreeMap::new(),
             outcomes: BTreeMap::new(),
         };
         let (a, b, c) = (report(0.5, 100.0), report(0.9, 120.0), report(0.9, 90.0));
@@ -415,6 +416,7 @@ mod tests {
             objective: Default::default(),
             deterministic: false,
             per_objective: BTreeMap::new(),
+            per_task: BTreeMap::new(),
             outcomes: BTreeMap::new(),
         };
         (job, report)

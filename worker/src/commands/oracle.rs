@@ -122,7 +122,7 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
     }
     for e in &episodes {
         let key = match e.fail_cause {
-            Some(cause) => format!("{} ({})", e.outcome, format!("{cause:?}").to_lowercase()),
+            Some(cause) => format!("{} ({})", e.outcome, cause.name()),
             None => e.outcome.clone(),
         };
         *outcomes.entry(key).or_insert(0) += 1;

@@ -147,6 +147,7 @@ pub fn evaluate(
     let mut noise = (!spec.deterministic).then(|| Noise::new(spec.seed ^ 0x00E7_A1ED_5EED));
     // Per objective: episodes, successes, control steps, simulated seconds.
     let mut sums: BTreeMap<Objective, (u64, u64, u64, f64)> = BTreeMap::new();
+    let mut task_sums: BTreeMap<String, (u64, u64, u64, f64)> = BTreeMap::new();
     let mut outcomes: BTreeMap<String, u64> = BTreeMap::new();
     for k in 0..spec.episodes {
         let seed = spec.seed.wrapping_mul(1_000_003).wrapping_add(k);
@@ -162,17 +163,28 @@ pub fn evaluate(
                 } else {
                     "truncated"
                 };
-                *outcomes.entry(end.to_string()).or_default() += 1;
+                let cause = crm_env.env().inner().last_fail();
+                let key = match cause {
+                    Some(cause) if end == "failure" => format!("{end} ({})", cause.name()),
+                    _ => end.to_string(),
+                };
+                *outcomes.entry(key).or_default() += 1;
                 let success = end == "success";
                 break (success, crm_env.episode().steps());
             }
             (stage, state) = (step.stage, step.abstract_state);
         };
-        let entry = sums.entry(objective).or_default();
-        entry.0 += 1;
-        entry.1 += u64::from(success);
-        entry.2 += length as u64;
-        entry.3 += f64::from(crm_env.env().inner().sim_seconds());
+        let seconds = f64::from(crm_env.env().inner().sim_seconds());
+        let task = crm_env.env().inner().task().id.clone();
+        for entry in [
+            sums.entry(objective).or_default(),
+            task_sums.entry(task).or_default(),
+        ] {
+            entry.0 += 1;
+            entry.1 += u64::from(success);
+            entry.2 += length as u64;
+            entry.3 += seconds;
+        }
         let machine = crm_env.machine();
         let episode = crm_env.episode();
         let record = EpisodeRecord {
@@ -222,6 +234,7 @@ pub fn evaluate(
             .into_iter()
             .map(|(o, s)| (o.name().to_string(), row(s)))
             .collect(),
+        per_task: task_sums.into_iter().map(|(t, s)| (t, row(s))).collect(),
         outcomes,
     })
 }
