@@ -50,6 +50,8 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    // Parallel environments, one thread per matrix product (see `crm_learn::kernels`).
+    crm_learn::kernels::one_thread_per_product();
     let result = match cli.command {
         Command::Up(args) => commands::service::up(args),
         Command::Worker(args) => commands::service::worker(args),

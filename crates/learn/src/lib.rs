@@ -10,6 +10,7 @@ pub mod early_stop;
 pub mod error;
 pub mod gae;
 pub mod imitation;
+pub mod kernels;
 pub mod layers;
 pub mod network;
 pub mod noise;

@@ -45,6 +45,10 @@ pub struct LearnBenchArgs {
     /// CRM-SAC gradient steps to time (batch 256).
     #[arg(long, default_value_t = 20)]
     pub sac_steps: usize,
+    /// Split matrix products over threads, as candle's `gemm` does by default (`crm` runs
+    /// each on one thread: see `crm_learn::kernels`), to compare the two.
+    #[arg(long)]
+    pub split_products: bool,
 }
 
 #[derive(Serialize)]
@@ -68,6 +72,8 @@ struct LearnReport {
     /// over the rollout above stored in its replay buffer.
     sac_gradient_steps_per_sec: f64,
     sac_batch_size: usize,
+    /// Whether matrix products were split over threads (`--split-products`).
+    split_products: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -199,6 +205,9 @@ fn env(args: EnvBenchArgs) -> anyhow::Result<()> {
 }
 
 fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
+    if args.split_products {
+        crm_learn::kernels::split_products();
+    }
     let benchmark = args.env.benchmark()?;
     let machine = args.env.machine()?;
     let mut config: crm_learn::PpoConfig = super::read_json(&args.config)?;
@@ -286,6 +295,7 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
         hidden: config.hidden,
         sac_gradient_steps_per_sec: sac_steps as f64 / sac_secs,
         sac_batch_size: sac_config.batch_size,
+        split_products: crm_learn::kernels::products_split(),
     };
     if args.json {
         emit(&format!("{}\n", serde_json::to_string(&report)?))
