@@ -68,6 +68,15 @@ impl FailCause {
     }
 }
 
+/// How an episode ended, as reports count it: the terminal stage (or `truncated`), a failure
+/// with its cause (`failure (dropped)`).
+pub fn outcome_label(end: &str, cause: Option<FailCause>) -> String {
+    match cause {
+        Some(cause) if end == "failure" => format!("{end} ({})", cause.name()),
+        _ => end.to_string(),
+    }
+}
+
 impl Judge {
     pub fn new(task: &Task, force_limit: f32, anchored: bool, config: &SimConfig) -> Self {
         Self {
@@ -212,6 +221,24 @@ mod tests {
             grip: 10.0,
             ..Snapshot::default()
         }
+    }
+
+    #[test]
+    fn outcomes_name_a_failures_cause_only() {
+        assert_eq!(
+            outcome_label("failure", Some(FailCause::Dropped)),
+            "failure (dropped)"
+        );
+        assert_eq!(outcome_label("failure", None), "failure");
+        // A cause left from an earlier step does not relabel a success or a truncation.
+        assert_eq!(
+            outcome_label("success", Some(FailCause::Crushed)),
+            "success"
+        );
+        assert_eq!(
+            outcome_label("truncated", Some(FailCause::Timeout)),
+            "truncated"
+        );
     }
 
     #[test]

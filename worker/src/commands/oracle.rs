@@ -121,10 +121,7 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         per_task.insert(benchmark.tasks[task].id.clone(), group(&of));
     }
     for e in &episodes {
-        let key = match e.fail_cause {
-            Some(cause) => format!("{} ({})", e.outcome, cause.name()),
-            None => e.outcome.clone(),
-        };
+        let key = grasp_sim::events::outcome_label(&e.outcome, e.fail_cause);
         *outcomes.entry(key).or_insert(0) += 1;
     }
     let mean_steps =

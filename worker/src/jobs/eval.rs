@@ -163,11 +163,7 @@ pub fn evaluate(
                 } else {
                     "truncated"
                 };
-                let cause = crm_env.env().inner().last_fail();
-                let key = match cause {
-                    Some(cause) if end == "failure" => format!("{end} ({})", cause.name()),
-                    _ => end.to_string(),
-                };
+                let key = grasp_sim::events::outcome_label(end, crm_env.env().inner().last_fail());
                 *outcomes.entry(key).or_default() += 1;
                 let success = end == "success";
                 break (success, crm_env.episode().steps());
