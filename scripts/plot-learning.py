@@ -27,7 +27,8 @@ def main():
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     ax = axes[0]
     for name, label in [
-        ("benchmark-i.metrics.jsonl", "run i, the shipped model: task curriculum (hard tasks drawn more)"),
+        ("benchmark-j.metrics.jsonl", "run j, the shipped model: run i's settings, seed 1"),
+        ("benchmark-i.metrics.jsonl", "run i: task curriculum (hard tasks drawn more), seed 0"),
         ("benchmark-h.metrics.jsonl", "run h: uniform tasks, lock-step rollouts"),
         ("benchmark-g.metrics.jsonl", "run g (earlier rules)"),
     ]:
