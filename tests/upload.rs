@@ -192,7 +192,7 @@ fn checkpoints_made_elsewhere_are_stored_once_checked_and_evaluated_remotely() {
     let again = upload(&addr, "/api/v1/checkpoints?name=again", &model, Some(TOKEN));
     assert_eq!(again.status, 200);
     assert_eq!(again.json()["id"], shipped_id);
-    let other = patched(&model, "\\\"steps\\\":3440640", "\\\"steps\\\":3440641");
+    let other = patched(&model, "\\\"steps\\\":4600000", "\\\"steps\\\":4600001");
     let created = upload(
         &addr,
         "/api/v1/checkpoints?name=my%20policy",
