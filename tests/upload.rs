@@ -207,7 +207,7 @@ fn checkpoints_made_elsewhere_are_stored_once_checked_and_evaluated_remotely() {
     );
     let created = created.json();
     assert_eq!(created["name"], "my policy");
-    assert_eq!(created["steps"], 3440641);
+    assert_eq!(created["steps"], 4600001);
     let id = created["id"].as_i64().expect("id");
     assert_ne!(id, shipped_id);
     let download = http(
