@@ -84,6 +84,11 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
         })
         .sum();
     assert_eq!(ended, 3);
+    // One task: its row counts the same endings.
+    assert_eq!(
+        result["per_task"]["mouse-press"]["outcomes"],
+        result["outcomes"]
+    );
     assert!(result["success_rate"].as_f64().is_some());
     // The paper's protocol is the default; the report says so and gives simulated time.
     assert_eq!(result["objective"], "scripted");

@@ -182,7 +182,16 @@ function perTask(perTaskRows) {
   if (!tasks.length) return '';
   return el('details', { class: 'per-task' },
     el('summary', {}, `${tasks.length} task${tasks.length === 1 ? '' : 's'}`),
-    el('ul', {}, tasks.map(([task, row]) => el('li', { 'data-task': task }, `${task} ${fmtNum(row.success_rate)} (${row.episodes})`))));
+    el('ul', {}, tasks.map(([task, row]) => el('li', { 'data-task': task }, `${task} ${fmtNum(row.success_rate)} (${row.episodes})${taskFailures(row.outcomes)}`))));
+}
+
+// A task's episodes that did not succeed, by cause (`: dropped 2, out_of_reach 1`); empty for
+// reports made before 2026-11-24, which count endings only overall.
+function taskFailures(outcomes) {
+  const failed = Object.entries(outcomes || {})
+    .filter(([outcome]) => outcome !== 'success')
+    .map(([outcome, n]) => `${outcome.replace(/^failure \((.*)\)$/, '$1')} ${n}`);
+  return failed.length ? `: ${failed.join(', ')}` : '';
 }
 
 function episodeList(episodes) {

@@ -141,6 +141,13 @@ check('a run page draws its curves, lists checkpoints and evaluations', async ()
   const [task, row] = Object.entries(done.result.per_task)[0];
   const item = await page.textContent(`#evaluations li[data-task="${task}"]`);
   assert.ok(item.includes(`${task} ${row.success_rate.toFixed(2)}`), item);
+  // ... and, for a task with failures, each cause with its count.
+  assert.ok(row.outcomes, 'per-task outcomes');
+  const failed = Object.entries(row.outcomes).filter(([outcome]) => outcome !== 'success');
+  for (const [outcome, n] of failed) {
+    assert.ok(item.includes(`${outcome.replace(/^failure \((.*)\)$/, '$1')} ${n}`), item);
+  }
+  assert.equal(item.includes(':'), failed.length > 0, item);
   assert.ok((await page.textContent('#evaluations td.outcomes')).length > 0, 'outcomes shown');
   // Run a records every episode: the section offers the file and the viewer command.
   await page.waitForSelector('#recording a[href$="/recording"]');

@@ -220,6 +220,34 @@ pub struct Row {
     /// Mean simulated seconds, the arm's scripted execution included.
     #[serde(default)]
     pub mean_sim_seconds: f64,
+    /// How this row's episodes ended, as [`EvalReport::outcomes`]. Empty in reports made
+    /// before 2026-11-24.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub outcomes: BTreeMap<String, u64>,
+}
+
+impl Row {
+    /// The row's episodes that did not succeed, by outcome (`dropped 3, out_of_reach 1`),
+    /// or `-` when every episode succeeded or the report has no outcomes.
+    pub fn failures(&self) -> String {
+        let failures: Vec<String> = self
+            .outcomes
+            .iter()
+            .filter(|(outcome, _)| outcome.as_str() != "success")
+            .map(|(outcome, n)| {
+                let short = outcome
+                    .strip_prefix("failure (")
+                    .and_then(|o| o.strip_suffix(')'))
+                    .unwrap_or(outcome);
+                format!("{short} {n}")
+            })
+            .collect();
+        if failures.is_empty() {
+            "-".to_string()
+        } else {
+            failures.join(", ")
+        }
+    }
 }
 
 /// The whole table for one checkpoint.
@@ -281,11 +309,15 @@ impl EvalReport {
             self.success_rate, self.mean_episode_length, self.mean_sim_seconds
         ));
         if self.per_task.len() > 1 {
-            text.push_str("\n| task | success | episodes | episode length | simulated s |\n| --- | --- | --- | --- | --- |\n");
+            text.push_str("\n| task | success | episodes | episode length | simulated s | failures |\n| --- | --- | --- | --- | --- | --- |\n");
             for (task, r) in &self.per_task {
                 text.push_str(&format!(
-                    "| {task} | {:.2} | {} | {:.1} | {:.1} |\n",
-                    r.success_rate, r.episodes, r.mean_episode_length, r.mean_sim_seconds
+                    "| {task} | {:.2} | {} | {:.1} | {:.1} | {} |\n",
+                    r.success_rate,
+                    r.episodes,
+                    r.mean_episode_length,
+                    r.mean_sim_seconds,
+                    r.failures()
                 ));
             }
         }
@@ -339,5 +371,57 @@ mod tests {
                 .expect("json")
                 .contains("curriculum")
         );
+    }
+
+    #[test]
+    fn markdown_lists_each_tasks_failures_by_cause() {
+        let row = |outcomes: &[(&str, u64)]| Row {
+            success_rate: 0.5,
+            mean_episode_length: 30.0,
+            episodes: outcomes.iter().map(|(_, n)| n).sum(),
+            mean_sim_seconds: 5.0,
+            outcomes: outcomes.iter().map(|(o, n)| (o.to_string(), *n)).collect(),
+        };
+        let bowl = row(&[
+            ("success", 2),
+            ("failure (dropped)", 1),
+            ("out_of_reach", 1),
+        ]);
+        assert_eq!(bowl.failures(), "dropped 1, out_of_reach 1");
+        let box_lift = row(&[("success", 3)]);
+        assert_eq!(box_lift.failures(), "-");
+        let report = EvalReport {
+            algorithm: "crm-ppo".into(),
+            trained_steps: 1,
+            episodes: 7,
+            seed: 0,
+            success_rate: 5.0 / 7.0,
+            mean_episode_length: 30.0,
+            mean_sim_seconds: 5.0,
+            objective: ObjectiveMode::default(),
+            deterministic: false,
+            per_objective: BTreeMap::from([("lift".to_string(), row(&[("success", 5)]))]),
+            per_task: BTreeMap::from([
+                ("bowl-lift".to_string(), bowl.clone()),
+                ("box-lift".to_string(), box_lift),
+            ]),
+            outcomes: BTreeMap::new(),
+        };
+        let text = report.markdown();
+        assert!(text.contains("| bowl-lift | 0.50 | 4 | 30.0 | 5.0 | dropped 1, out_of_reach 1 |"));
+        assert!(text.contains("| box-lift | 0.50 | 3 | 30.0 | 5.0 | - |"));
+        // Rows of older reports have no outcomes; they read back and are not written out.
+        let old: Row = serde_json::from_str(
+            r#"{"success_rate": 1.0, "mean_episode_length": 2.0, "episodes": 1}"#,
+        )
+        .expect("old row");
+        assert!(old.outcomes.is_empty());
+        assert!(
+            !serde_json::to_string(&old)
+                .expect("json")
+                .contains("outcomes")
+        );
+        let json = serde_json::to_string(&bowl).expect("json");
+        assert_eq!(serde_json::from_str::<Row>(&json).expect("row"), bowl);
     }
 }

@@ -123,6 +123,37 @@ pub struct EpisodeRecord {
     pub transitions: Vec<(usize, String, String, String, f32)>,
 }
 
+/// Running sums of one row of the report.
+#[derive(Default)]
+struct Sums {
+    episodes: u64,
+    successes: u64,
+    control_steps: u64,
+    seconds: f64,
+    outcomes: BTreeMap<String, u64>,
+}
+
+impl Sums {
+    fn add(&mut self, success: bool, length: usize, seconds: f64, outcome: &str) {
+        self.episodes += 1;
+        self.successes += u64::from(success);
+        self.control_steps += length as u64;
+        self.seconds += seconds;
+        *self.outcomes.entry(outcome.to_string()).or_default() += 1;
+    }
+
+    fn row(self) -> Row {
+        let n = self.episodes.max(1) as f64;
+        Row {
+            success_rate: self.successes as f64 / n,
+            mean_episode_length: self.control_steps as f64 / n,
+            episodes: self.episodes,
+            mean_sim_seconds: self.seconds / n,
+            outcomes: self.outcomes,
+        }
+    }
+}
+
 /// Evaluates the checkpoint at `path`. After each episode `progress(done, total, record)` is
 /// called; returning `false` stops the evaluation with an error ("cancelled").
 pub fn evaluate(
@@ -145,15 +176,16 @@ pub fn evaluate(
     let mut crm_env = crm::CrmEnv::new(machine, recorded, crm::RewardMode::Crm);
     // The policy's noise when it samples (the default, as the paper's evaluation): seeded.
     let mut noise = (!spec.deterministic).then(|| Noise::new(spec.seed ^ 0x00E7_A1ED_5EED));
-    // Per objective: episodes, successes, control steps, simulated seconds.
-    let mut sums: BTreeMap<Objective, (u64, u64, u64, f64)> = BTreeMap::new();
-    let mut task_sums: BTreeMap<String, (u64, u64, u64, f64)> = BTreeMap::new();
-    let mut outcomes: BTreeMap<String, u64> = BTreeMap::new();
+    // Per objective and per task: episodes, successes, control steps, simulated seconds,
+    // outcomes.
+    let mut sums: BTreeMap<Objective, Sums> = BTreeMap::new();
+    let mut task_sums: BTreeMap<String, Sums> = BTreeMap::new();
+    let mut overall = Sums::default();
     for k in 0..spec.episodes {
         let seed = spec.seed.wrapping_mul(1_000_003).wrapping_add(k);
         let (mut stage, mut state) = crm_env.reset(seed).context("reset")?;
         let objective = crm_env.env().inner().objective();
-        let (success, length) = loop {
+        let (success, length, outcome) = loop {
             let mask = crm_env.machine().action_mask(stage);
             let action = policy.act(&state, stage, &mask, noise.as_mut())?;
             let step = crm_env.step(&action)?;
@@ -163,10 +195,10 @@ pub fn evaluate(
                 } else {
                     "truncated"
                 };
-                let key = grasp_sim::events::outcome_label(end, crm_env.env().inner().last_fail());
-                *outcomes.entry(key).or_default() += 1;
+                let outcome =
+                    grasp_sim::events::outcome_label(end, crm_env.env().inner().last_fail());
                 let success = end == "success";
-                break (success, crm_env.episode().steps());
+                break (success, crm_env.episode().steps(), outcome);
             }
             (stage, state) = (step.stage, step.abstract_state);
         };
@@ -175,11 +207,9 @@ pub fn evaluate(
         for entry in [
             sums.entry(objective).or_default(),
             task_sums.entry(task).or_default(),
+            &mut overall,
         ] {
-            entry.0 += 1;
-            entry.1 += u64::from(success);
-            entry.2 += length as u64;
-            entry.3 += seconds;
+            entry.add(success, length, seconds, &outcome);
         }
         let machine = crm_env.machine();
         let episode = crm_env.episode();
@@ -206,16 +236,8 @@ pub fn evaluate(
             bail!("cancelled after {} of {} episodes", k + 1, spec.episodes);
         }
     }
-    let row = |(n, wins, length, seconds): (u64, u64, u64, f64)| Row {
-        success_rate: wins as f64 / n.max(1) as f64,
-        mean_episode_length: length as f64 / n.max(1) as f64,
-        episodes: n,
-        mean_sim_seconds: seconds / n.max(1) as f64,
-    };
-    let total = sums.values().fold((0, 0, 0, 0.0), |a, b| {
-        (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3)
-    });
-    let overall = row(total);
+    let outcomes = overall.outcomes.clone();
+    let overall = overall.row();
     Ok(EvalReport {
         algorithm,
         trained_steps,
@@ -228,9 +250,9 @@ pub fn evaluate(
         deterministic: spec.deterministic,
         per_objective: sums
             .into_iter()
-            .map(|(o, s)| (o.name().to_string(), row(s)))
+            .map(|(o, s)| (o.name().to_string(), s.row()))
             .collect(),
-        per_task: task_sums.into_iter().map(|(t, s)| (t, row(s))).collect(),
+        per_task: task_sums.into_iter().map(|(t, s)| (t, s.row())).collect(),
         outcomes,
     })
 }
