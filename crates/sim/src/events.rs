@@ -47,6 +47,7 @@ pub struct Judge {
     over_limit_steps: usize,
     lifted_once: bool,
     progress: f32,
+    reach_cause: Option<ReachCause>,
 }
 
 /// Why a `fail` fired (for logs and the oracle's report).
@@ -68,11 +69,41 @@ impl FailCause {
     }
 }
 
+/// Why the object left the workspace (`aor` or `gor`), for reports. Labels only: every cause
+/// ends the episode in `out_of_reach` with the same transition reward.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReachCause {
+    /// Moved more than the workspace radius across the table.
+    PushedAway,
+    /// More than 5 cm below its start: off the table.
+    OffTable,
+    /// Tipped past 60 degrees with no hand contact, never lifted.
+    TippedOver,
+    /// Tipped past 60 degrees with no hand contact after it had been lifted: it turned out of
+    /// the hand during the arm's lift or hold and is on its way down (a drop the drop test
+    /// has not seen yet).
+    TippedInAir,
+}
+
+impl ReachCause {
+    /// The cause's name in reports (`out_of_reach (tipped in the air)`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::PushedAway => "pushed away",
+            Self::OffTable => "off the table",
+            Self::TippedOver => "tipped over",
+            Self::TippedInAir => "tipped in the air",
+        }
+    }
+}
+
 /// How an episode ended, as reports count it: the terminal stage (or `truncated`), a failure
-/// with its cause (`failure (dropped)`).
-pub fn outcome_label(end: &str, cause: Option<FailCause>) -> String {
-    match cause {
-        Some(cause) if end == "failure" => format!("{end} ({})", cause.name()),
+/// with its cause (`failure (dropped)`), an object out of reach with its cause
+/// (`out_of_reach (pushed away)`).
+pub fn outcome_label(end: &str, fail: Option<FailCause>, reach: Option<ReachCause>) -> String {
+    match (end, fail, reach) {
+        ("failure", Some(cause), _) => format!("{end} ({})", cause.name()),
+        ("out_of_reach", _, Some(cause)) => format!("{end} ({})", cause.name()),
         _ => end.to_string(),
     }
 }
@@ -100,6 +131,7 @@ impl Judge {
             over_limit_steps: 0,
             lifted_once: false,
             progress: 0.0,
+            reach_cause: None,
         }
     }
 
@@ -107,6 +139,11 @@ impl Judge {
     /// in every stage but `approach`, so a flat machine's single stage has them too.
     pub fn set_stage(&mut self, stage: &str) {
         self.in_grasp = stage != "approach";
+    }
+
+    /// Why the object first left the workspace in this episode, if it did.
+    pub fn reach_cause(&self) -> Option<ReachCause> {
+        self.reach_cause
     }
 
     /// Progress of the success test in `[0, 1]`.
@@ -129,8 +166,20 @@ impl Judge {
         }
         let horizontal = (s.displacement[0].powi(2) + s.displacement[1].powi(2)).sqrt();
         let knocked_over = !self.anchored && s.contacts == 0 && s.tilt > 60f32.to_radians();
-        if horizontal > self.workspace_radius || s.displacement[2] < -0.05 || knocked_over {
+        let reach_cause = if horizontal > self.workspace_radius {
+            Some(ReachCause::PushedAway)
+        } else if s.displacement[2] < -0.05 {
+            Some(ReachCause::OffTable)
+        } else if knocked_over && self.lifted_once {
+            Some(ReachCause::TippedInAir)
+        } else if knocked_over {
+            Some(ReachCause::TippedOver)
+        } else {
+            None
+        };
+        if let Some(cause) = reach_cause {
             // The object left the workspace; the machine takes `aor` from approach, `gor` from grasp.
+            self.reach_cause.get_or_insert(cause);
             events.push("aor");
             events.push("gor");
         }
@@ -224,21 +273,89 @@ mod tests {
     }
 
     #[test]
-    fn outcomes_name_a_failures_cause_only() {
+    fn outcomes_name_the_cause_of_a_failure_and_of_an_object_out_of_reach() {
         assert_eq!(
-            outcome_label("failure", Some(FailCause::Dropped)),
+            outcome_label("failure", Some(FailCause::Dropped), None),
             "failure (dropped)"
         );
-        assert_eq!(outcome_label("failure", None), "failure");
-        // A cause left from an earlier step does not relabel a success or a truncation.
+        assert_eq!(outcome_label("failure", None, None), "failure");
         assert_eq!(
-            outcome_label("success", Some(FailCause::Crushed)),
+            outcome_label("out_of_reach", None, Some(ReachCause::PushedAway)),
+            "out_of_reach (pushed away)"
+        );
+        assert_eq!(outcome_label("out_of_reach", None, None), "out_of_reach");
+        // A cause left from an earlier step does not relabel another ending.
+        assert_eq!(
+            outcome_label("success", Some(FailCause::Crushed), None),
             "success"
         );
         assert_eq!(
-            outcome_label("truncated", Some(FailCause::Timeout)),
+            outcome_label("truncated", Some(FailCause::Timeout), None),
             "truncated"
         );
+        assert_eq!(
+            outcome_label(
+                "failure",
+                Some(FailCause::Dropped),
+                Some(ReachCause::TippedOver)
+            ),
+            "failure (dropped)"
+        );
+    }
+
+    #[test]
+    fn an_object_out_of_reach_is_told_pushed_off_tipped_or_tipped_in_the_air() {
+        let tipped = Snapshot {
+            tilt: 1.5,
+            displacement: [0.0, 0.0, 0.03],
+            ..Snapshot::default()
+        };
+        let cases = [
+            (
+                false,
+                Snapshot {
+                    displacement: [0.2, 0.0, 0.0],
+                    ..Snapshot::default()
+                },
+                ReachCause::PushedAway,
+            ),
+            (
+                false,
+                Snapshot {
+                    displacement: [0.0, 0.0, -0.1],
+                    ..Snapshot::default()
+                },
+                ReachCause::OffTable,
+            ),
+            (false, tipped.clone(), ReachCause::TippedOver),
+            // Lifted, then turned out of the hand: still in the air, no contact.
+            (true, tipped, ReachCause::TippedInAir),
+        ];
+        for (lift_first, snapshot, cause) in cases {
+            let (mut judge, _) = grasping_judge(Objective::Lift, None);
+            assert_eq!(judge.reach_cause(), None);
+            if lift_first {
+                judge.judge(&held());
+            }
+            let (events, _) = judge.judge(&snapshot);
+            assert!(events.contains(&"gor"), "{cause:?}");
+            assert_eq!(judge.reach_cause(), Some(cause));
+            // The first cause stays.
+            judge.judge(&Snapshot {
+                displacement: [0.3, 0.0, 0.0],
+                ..Snapshot::default()
+            });
+            assert_eq!(judge.reach_cause(), Some(cause));
+        }
+        // A tipped object the hand still touches is not out of reach.
+        let (mut judge, _) = grasping_judge(Objective::Lift, None);
+        let touched = Snapshot {
+            tilt: 1.5,
+            contacts: 2,
+            ..Snapshot::default()
+        };
+        assert!(!judge.judge(&touched).0.contains(&"gor"));
+        assert_eq!(judge.reach_cause(), None);
     }
 
     #[test]

@@ -145,6 +145,9 @@ pub struct OracleEpisode {
     pub outcome: String,
     /// Why the grasp failed, when it did.
     pub fail_cause: Option<crate::events::FailCause>,
+    /// How the episode ended as reports count it (`failure (dropped)`, `out_of_reach
+    /// (pushed away)`; see [`crate::events::outcome_label`]).
+    pub label: String,
 }
 
 /// Runs one oracle episode of `task` with `seed` through the grasping machine.
@@ -184,6 +187,7 @@ pub fn run_episode(
         } else {
             None
         },
+        label: crm_env.env().outcome_label(&outcome),
         outcome,
     };
     let (_, env) = crm_env.into_parts();

@@ -121,8 +121,7 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         per_task.insert(benchmark.tasks[task].id.clone(), group(&of));
     }
     for e in &episodes {
-        let key = grasp_sim::events::outcome_label(&e.outcome, e.fail_cause);
-        *outcomes.entry(key).or_insert(0) += 1;
+        *outcomes.entry(e.label.clone()).or_insert(0) += 1;
     }
     let mean_steps =
         episodes.iter().map(|e| e.steps as f64).sum::<f64>() / episodes.len().max(1) as f64;

@@ -195,8 +195,7 @@ pub fn evaluate(
                 } else {
                     "truncated"
                 };
-                let outcome =
-                    grasp_sim::events::outcome_label(end, crm_env.env().inner().last_fail());
+                let outcome = crm_env.env().inner().outcome_label(end);
                 let success = end == "success";
                 break (success, crm_env.episode().steps(), outcome);
             }

@@ -191,6 +191,17 @@ impl GraspEnv {
         self.last_fail
     }
 
+    /// Why the object left the workspace in this episode, if it did.
+    pub fn reach_cause(&self) -> Option<crate::events::ReachCause> {
+        self.judge.as_ref().and_then(|j| j.reach_cause())
+    }
+
+    /// How the episode ended as reports count it, given its terminal stage (or `truncated`):
+    /// see [`crate::events::outcome_label`].
+    pub fn outcome_label(&self, end: &str) -> String {
+        crate::events::outcome_label(end, self.last_fail, self.reach_cause())
+    }
+
     /// The current grasp location: the object's pose composed with the task's offset.
     pub fn grasp_location(&self) -> Option<Vec3> {
         let scene = self.scene.as_ref()?;
