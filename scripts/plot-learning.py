@@ -27,7 +27,9 @@ def main():
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     ax = axes[0]
     for name, label in [
-        ("benchmark-j.metrics.jsonl", "run j, the shipped model: run i's settings, seed 1"),
+        ("benchmark-k.metrics.jsonl", "run k, the shipped model: 3.75 M steps, seed 1"),
+        ("benchmark-l.metrics.jsonl", "run l: run k's command, seed 0"),
+        ("benchmark-j.metrics.jsonl", "run j: 4.6 M steps, seed 1"),
         ("benchmark-i.metrics.jsonl", "run i: task curriculum (hard tasks drawn more), seed 0"),
         ("benchmark-h.metrics.jsonl", "run h: uniform tasks, lock-step rollouts"),
         ("benchmark-g.metrics.jsonl", "run g (earlier rules)"),
