@@ -69,8 +69,8 @@ impl FailCause {
     }
 }
 
-/// Why the object left the workspace (`aor` or `gor`), for reports. Labels only: every cause
-/// ends the episode in `out_of_reach` with the same transition reward.
+/// Why the object left the workspace (`aor` or `gor`), for reports. Labels only: the events,
+/// the machine's transitions and their rewards do not depend on the cause.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ReachCause {
     /// Moved more than the workspace radius across the table.
