@@ -143,10 +143,9 @@ pub struct OracleEpisode {
     pub sim_seconds: f32,
     /// The terminal stage reached, or `truncated`.
     pub outcome: String,
-    /// Why the grasp failed, when it did.
-    pub fail_cause: Option<crate::events::FailCause>,
-    /// How the episode ended as reports count it (`failure (dropped)`, `out_of_reach
-    /// (pushed away)`; see [`crate::events::outcome_label`]).
+    /// How the episode ended as reports count it, with the cause of a failure or of an object
+    /// out of reach (`failure (dropped)`, `out_of_reach (pushed away)`; see
+    /// [`crate::events::outcome_label`]).
     pub label: String,
 }
 
@@ -182,11 +181,6 @@ pub fn run_episode(
         success: outcome == "success",
         steps,
         sim_seconds: crm_env.env().sim_seconds(),
-        fail_cause: if outcome == "failure" {
-            crm_env.env().last_fail()
-        } else {
-            None
-        },
         label: crm_env.env().outcome_label(&outcome),
         outcome,
     };

@@ -235,7 +235,6 @@ pub fn evaluate(
             bail!("cancelled after {} of {} episodes", k + 1, spec.episodes);
         }
     }
-    let outcomes = overall.outcomes.clone();
     let overall = overall.row();
     Ok(EvalReport {
         algorithm,
@@ -252,6 +251,6 @@ pub fn evaluate(
             .map(|(o, s)| (o.name().to_string(), s.row()))
             .collect(),
         per_task: task_sums.into_iter().map(|(t, s)| (t, s.row())).collect(),
-        outcomes,
+        outcomes: overall.outcomes,
     })
 }
