@@ -35,6 +35,26 @@ fn oracle_json_reports_the_issue_fields() {
     assert!(report["per_objective"]["press"]["episodes"] == 1);
     assert!(report["per_objective"]["twist"]["success_rate"].is_number());
     assert!(report["mean_episode_steps"].as_f64().expect("steps") > 0.0);
+    // Each task's and objective's outcomes count its own episodes, and the groups add up
+    // to the report's outcomes.
+    let mut summed = std::collections::BTreeMap::<String, u64>::new();
+    for task in ["mouse-press", "faucet-twist"] {
+        let outcomes = report["per_task"][task]["outcomes"]
+            .as_object()
+            .expect("per-task outcomes");
+        let count: u64 = outcomes.values().filter_map(|n| n.as_u64()).sum();
+        assert_eq!(count, 1, "{task}: {outcomes:?}");
+        for (label, n) in outcomes {
+            *summed.entry(label.clone()).or_default() += n.as_u64().unwrap_or(0);
+        }
+    }
+    let overall: std::collections::BTreeMap<String, u64> =
+        serde_json::from_value(report["outcomes"].clone()).expect("outcomes");
+    assert_eq!(summed, overall);
+    assert_eq!(
+        report["per_objective"]["press"]["outcomes"],
+        report["per_task"]["mouse-press"]["outcomes"]
+    );
 }
 
 #[test]

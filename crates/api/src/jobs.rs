@@ -230,23 +230,30 @@ impl Row {
     /// The row's episodes that did not succeed, by outcome (`dropped 3, out_of_reach 1`),
     /// or `-` when every episode succeeded or the report has no outcomes.
     pub fn failures(&self) -> String {
-        let failures: Vec<String> = self
-            .outcomes
-            .iter()
-            .filter(|(outcome, _)| outcome.as_str() != "success")
-            .map(|(outcome, n)| {
-                let short = outcome
-                    .strip_prefix("failure (")
-                    .and_then(|o| o.strip_suffix(')'))
-                    .unwrap_or(outcome);
-                format!("{short} {n}")
-            })
-            .collect();
-        if failures.is_empty() {
-            "-".to_string()
-        } else {
-            failures.join(", ")
-        }
+        failure_summary(&self.outcomes)
+    }
+}
+
+/// Episodes that did not succeed, by outcome, in one line: `failure (x)` is shortened to `x`
+/// and other labels (`out_of_reach (tipped over)`) are kept whole; `-` when there are none.
+/// `crm eval`'s task table and `crm oracle` print it (the run page's list shortens the same
+/// way in `web/`).
+pub fn failure_summary<N: std::fmt::Display>(outcomes: &BTreeMap<String, N>) -> String {
+    let failures: Vec<String> = outcomes
+        .iter()
+        .filter(|(outcome, _)| outcome.as_str() != "success")
+        .map(|(outcome, n)| {
+            let short = outcome
+                .strip_prefix("failure (")
+                .and_then(|o| o.strip_suffix(')'))
+                .unwrap_or(outcome);
+            format!("{short} {n}")
+        })
+        .collect();
+    if failures.is_empty() {
+        "-".to_string()
+    } else {
+        failures.join(", ")
     }
 }
 

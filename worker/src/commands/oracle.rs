@@ -2,6 +2,7 @@
 
 use std::collections::BTreeMap;
 
+use crm_api::jobs::failure_summary;
 use grasp_sim::benchmark::Objective;
 use grasp_sim::oracle::{Oracle, OracleEpisode, run_episode};
 use grasp_sim::{GraspEnv, TaskChoice};
@@ -37,6 +38,9 @@ pub struct OracleArgs {
 struct Group {
     success_rate: f64,
     episodes: usize,
+    /// How the group's episodes ended (`success`, `failure (dropped)`, ...), as in the
+    /// report's `outcomes`.
+    outcomes: BTreeMap<String, usize>,
 }
 
 #[derive(Serialize)]
@@ -58,6 +62,10 @@ struct Report {
 
 fn group(episodes: &[&OracleEpisode]) -> Group {
     let wins = episodes.iter().filter(|e| e.success).count();
+    let mut outcomes = BTreeMap::new();
+    for e in episodes {
+        *outcomes.entry(e.label.clone()).or_insert(0) += 1;
+    }
     Group {
         success_rate: if episodes.is_empty() {
             0.0
@@ -65,6 +73,7 @@ fn group(episodes: &[&OracleEpisode]) -> Group {
             wins as f64 / episodes.len() as f64
         },
         episodes: episodes.len(),
+        outcomes,
     }
 }
 
@@ -115,23 +124,20 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         }
     }
     let mut per_task = BTreeMap::new();
-    let mut outcomes = BTreeMap::new();
     for &task in &selected {
         let of: Vec<_> = all.iter().copied().filter(|e| e.task == task).collect();
         per_task.insert(benchmark.tasks[task].id.clone(), group(&of));
     }
-    for e in &episodes {
-        *outcomes.entry(e.label.clone()).or_insert(0) += 1;
-    }
+    let overall = group(&all);
     let mean_steps =
         episodes.iter().map(|e| e.steps as f64).sum::<f64>() / episodes.len().max(1) as f64;
     let report = Report {
         tasks: selected.len(),
         episodes: episodes.len(),
-        success_rate: group(&all).success_rate,
+        success_rate: overall.success_rate,
         per_objective,
         per_task,
-        outcomes,
+        outcomes: overall.outcomes,
         mean_episode_steps: mean_steps,
         objective: args.env.protocol.name(),
         mean_episode_seconds: episodes
@@ -158,15 +164,19 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         for (name, g) in &report.per_objective {
             writeln!(
                 text,
-                "  {name:<13} {:.3} over {}",
-                g.success_rate, g.episodes
+                "  {name:<13} {:.3} over {}  failures: {}",
+                g.success_rate,
+                g.episodes,
+                failure_summary(&g.outcomes)
             )?;
         }
         for (name, g) in &report.per_task {
             writeln!(
                 text,
-                "  task {name:<16} {:.3} over {}",
-                g.success_rate, g.episodes
+                "  task {name:<16} {:.3} over {}  failures: {}",
+                g.success_rate,
+                g.episodes,
+                failure_summary(&g.outcomes)
             )?;
         }
         writeln!(text, "  outcomes: {:?}", report.outcomes)?;
