@@ -30,6 +30,7 @@ def main():
         ("benchmark-k.metrics.jsonl", "run k, the shipped model: 3.75 M steps, seed 1"),
         ("benchmark-l.metrics.jsonl", "run l: run k's command, seed 0"),
         ("benchmark-m.metrics.jsonl", "run m: run k's command, seed 2"),
+        ("benchmark-n.metrics.jsonl", "run n: run k's command, seed 3"),
         ("benchmark-j.metrics.jsonl", "run j: 4.6 M steps, seed 1"),
         ("benchmark-i.metrics.jsonl", "run i: task curriculum (hard tasks drawn more), seed 0"),
         ("benchmark-h.metrics.jsonl", "run h: uniform tasks, lock-step rollouts"),
