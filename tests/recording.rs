@@ -6,6 +6,7 @@
 
 mod support;
 
+use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::Command;
 
@@ -261,6 +262,22 @@ fn jobs_store_their_recordings_with_the_run() {
     assert_eq!(support::recording_status(&addr, live_id), 404);
 }
 
+/// A viewer started in its own process group. pip's `rerun` is a Python wrapper that starts
+/// the viewer binary as its child, so killing the wrapper alone (`support::Proc`) left the
+/// viewer running after every test run: the whole group is killed instead.
+struct Viewer(std::process::Child);
+
+impl Drop for Viewer {
+    fn drop(&mut self) {
+        let group = format!("-{}", self.0.id());
+        Command::new("kill")
+            .args(["-KILL", "--", &group])
+            .status()
+            .ok();
+        self.0.wait().ok();
+    }
+}
+
 /// The rerun CLI of the pip package (`pip install rerun-sdk==0.36.3`): `RERUN_BIN`, else
 /// `rerun` on the PATH.
 fn rerun_cli() -> Option<std::path::PathBuf> {
@@ -286,12 +303,13 @@ fn a_job_streams_live_to_a_viewer() {
     let saved = dir.0.join("live.rrd");
     let port = support::free_port();
     // A headless viewer: its gRPC proxy saves what it receives.
-    let _viewer = support::Proc(
+    let _viewer = Viewer(
         Command::new(rerun)
             .args(["--port", &port.to_string(), "--save"])
             .arg(&saved)
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::null())
+            .process_group(0)
             .spawn()
             .expect("start rerun"),
     );
