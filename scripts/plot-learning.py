@@ -18,14 +18,65 @@ def load(name):
     return [json.loads(line) for line in (DOCS / name).read_text().splitlines() if line.strip()]
 
 
-def curve(ax, rows, x, label):
+def curve(ax, rows, x, label, **style):
     xs = [r[x] / (60.0 if x == "wall_s" else 1e6) for r in rows]
-    ax.plot(xs, [r["success_rate_last_100"] for r in rows], label=label)
+    ax.plot(xs, [r["success_rate_last_100"] for r in rows], label=label, **style)
+
+
+def phases(*names):
+    """Metric logs of one run trained in phases (`crm train --resume`): each phase's wall
+    clock continues where the one before ended."""
+    rows, offset, ends = [], 0.0, []
+    for name in names:
+        part = load(name)
+        rows += [dict(r, wall_s=r["wall_s"] + offset) for r in part]
+        offset = rows[-1]["wall_s"]
+        ends.append(offset / 60.0)
+    return rows, ends[:-1]
+
+
+def task_map(rows, marks, title, path):
+    """Each task's training success (`task_success`, its last 50 episodes) over wall-clock
+    minutes, weakest at the end on top."""
+    rows = [r for r in rows if r.get("task_success")]
+    tasks = sorted(rows[-1]["task_success"], key=lambda t: rows[-1]["task_success"][t])
+    grid = [[r["task_success"].get(t, float("nan")) for r in rows] for t in tasks]
+    # Each iteration's column spans the wall-clock time since the one before it.
+    edges = [0.0] + [r["wall_s"] / 60.0 for r in rows]
+    fig, ax = plt.subplots(figsize=(11, 6))
+    image = ax.pcolormesh(
+        edges,
+        [k - 0.5 for k in range(len(tasks) + 1)],
+        grid,
+        cmap="viridis",
+        vmin=0,
+        vmax=1,
+    )
+    ax.invert_yaxis()
+    for minute in marks:
+        ax.axvline(minute, color="white", linestyle="--", linewidth=1)
+    ax.set_yticks(range(len(tasks)))
+    ax.set_yticklabels(tasks, fontsize=7)
+    ax.set_xlabel("wall-clock minutes, 2 cores")
+    ax.set_title(title)
+    fig.colorbar(image, ax=ax, label="training success, last 50 episodes of the task")
+    fig.tight_layout()
+    fig.savefig(DOCS / path, dpi=110)
 
 
 def main():
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     ax = axes[0]
+    two_phase = ("benchmark-p.metrics.jsonl", "benchmark-q.metrics.jsonl")
+    if all((DOCS / name).exists() for name in two_phase):
+        rows, marks = phases(*two_phase)
+        curve(ax, rows, "wall_s", "run q: 1 s hold to 100%, then the 5 s hold, seed 1", color="black")
+        task_map(
+            rows,
+            marks,
+            "run q per task: a 1 s hold until the dashed line (run p), then the paper's 5 s",
+            "tasks-q.png",
+        )
     for name, label in [
         ("benchmark-k.metrics.jsonl", "run k, the shipped model: 3.75 M steps, seed 1"),
         ("benchmark-l.metrics.jsonl", "run l: run k's command, seed 0"),

@@ -37,6 +37,13 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
     assert_eq!(metrics.len(), 4, "one entry per iteration of 1024 steps");
     assert_eq!(metrics[3]["steps"], 4096);
     assert!(metrics[0]["data"]["stage_mix"].is_object());
+    // Per-task training success: this run's one task, once its episodes end.
+    let last = &metrics[3]["data"]["task_success"]["mouse-press"];
+    assert!(
+        last.as_f64().is_some_and(|s| (0.0..=1.0).contains(&s)),
+        "{}",
+        metrics[3]["data"]
+    );
     let checkpoint = done["result"]["checkpoint_id"]
         .as_i64()
         .expect("checkpoint id");
@@ -182,6 +189,14 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
         (
             r#"{"kind": "eval", "checkpoint_id": 1, "objective": 3}"#,
             "objective",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "hold_s": 0}"#,
+            "hold_s",
+        ),
+        (
+            r#"{"kind": "eval", "checkpoint_id": 1, "hold_s": 60}"#,
+            "hold_s",
         ),
         (r#"{"kind": "fly"}"#, "kind"),
         ("not json", "body"),

@@ -145,6 +145,7 @@ function submitForm(catalog, onQueued) {
     episodes: el('input', { id: 'f-episodes', name: 'episodes', type: 'text', inputmode: 'numeric', value: '1000' }),
     record_every: el('input', { id: 'f-record_every', name: 'record_every', type: 'text', inputmode: 'numeric', placeholder: 'off' }),
     record_connect: el('input', { id: 'f-record_connect', name: 'record_connect', type: 'text', placeholder: 'rerun+http://127.0.0.1:9876/proxy' }),
+    hold_s: el('input', { id: 'f-hold_s', name: 'hold_s', type: 'text', inputmode: 'decimal', placeholder: '5 (the paper)' }),
   };
   const formError = el('div', { class: 'field-error', 'data-error-for': '' });
   const trainOnly = [
@@ -172,6 +173,7 @@ function submitForm(catalog, onQueued) {
       field('tasks', 'tasks', inputs.tasks, 'none selected: random tasks'),
       field('seed', 'seed', inputs.seed), field('topology', 'topology', inputs.topology, 'task: assigned; auto: the network\'s pick'),
       field('objective', 'objective', inputs.objective, 'who lifts, pulls, twists or presses once the grasp is ready'),
+      field('hold_s', 'steady hold (s)', inputs.hold_s, 'what the judge asks of a held object (the paper: 5)'),
       field('record', 'record every N episodes', inputs.record_every, 'rerun recording stored with the job (at most 20 episodes)'),
       field('record_connect', 'or stream to a viewer', inputs.record_connect, 'live instead of the file')),
     formError,
@@ -194,6 +196,8 @@ function submitForm(catalog, onQueued) {
     body.seed = number('seed');
     if (inputs.topology.value !== 'task') body.topology = inputs.topology.value;
     if (inputs.objective.value !== 'scripted') body.objective = inputs.objective.value;
+    const hold = number('hold_s');
+    if (hold !== undefined) body.hold_s = hold;
     const every = number('record_every');
     const connect = inputs.record_connect.value.trim();
     if (every !== undefined || connect) {

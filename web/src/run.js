@@ -5,7 +5,7 @@ import {
   fmtBytes, fmtTime, getJson, notFound, onChange, phaseOf, phaseText, send, tasksOf,
 } from './api.js';
 
-const METRICS = ['success', 'episode_length', 'return', 'reward_split', 'stages', 'entropy', 'value_loss', 'learning_rate'];
+const METRICS = ['success', 'task_success', 'episode_length', 'return', 'reward_split', 'stages', 'entropy', 'value_loss', 'learning_rate'];
 
 export async function renderRun(main, idText) {
   const id = Number(idText);

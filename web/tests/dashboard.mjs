@@ -100,6 +100,10 @@ check('the form shows API errors next to the field, then queues a job that appea
   await page.waitForFunction(() => /imitation\.episodes/.test(document.querySelector('[data-error-for="imitation"]').textContent));
   await page.fill('#f-imitation', '40');
   await page.fill('#f-record_every', '5');
+  await page.fill('#f-hold_s', '0');
+  await page.click('#submit-job button[type=submit]');
+  await page.waitForFunction(() => /between 0\.1 and 8/.test(document.querySelector('[data-error-for="hold_s"]').textContent));
+  await page.fill('#f-hold_s', '1.5');
   await page.selectOption('#f-tasks', ['valve-twist']);
   await page.selectOption('#f-objective', 'learned');
   await page.check('#f-curriculum');
@@ -117,6 +121,7 @@ check('the form shows API errors next to the field, then queues a job that appea
   assert.equal(stored.spec.imitation.episodes, 40);
   assert.equal(stored.spec.objective, 'learned');
   assert.equal(stored.spec.curriculum, true);
+  assert.equal(stored.spec.hold_s, 1.5);
 
   // Cancel it from its row; the list follows. (A selector, not the row's handle: live updates
   // redraw the list while a worker reports.)
@@ -127,7 +132,9 @@ check('the form shows API errors next to the field, then queues a job that appea
 check('a run page draws its curves, lists checkpoints and evaluations', async () => {
   await page.goto(`${base}/runs/${runA}`);
   await page.waitForSelector('h1:has-text("Run #")');
-  await chartsDrawn(8);
+  await chartsDrawn(9);
+  // The per-task chart names the run's task (the training log's `task_success`).
+  assert.match(await page.textContent('figure[data-metric="task_success"] svg'), /mouse-press/);
   const rows = await page.$$('#checkpoints tr[data-checkpoint]');
   assert.ok(rows.length >= 1, 'a checkpoint row');
   const href = await page.getAttribute('#checkpoints tr[data-checkpoint] a', 'href');
@@ -169,9 +176,9 @@ check('a run page draws its curves, lists checkpoints and evaluations', async ()
   // Another x axis redraws the charts.
   await page.selectOption('select[name="x"]', 'episodes');
   await page.waitForFunction(() => document.querySelector('figure[data-metric="success"] svg')?.textContent.includes('episodes'));
-  await chartsDrawn(8);
+  await chartsDrawn(9);
   await page.selectOption('select[name="x"]', 'steps');
-  await chartsDrawn(8);
+  await chartsDrawn(9);
   await shot('run');
 });
 

@@ -48,6 +48,11 @@ impl TaskCurriculum {
         }
     }
 
+    /// Episodes of `task` in its window (0 for a task out of range).
+    pub fn episodes(&self, task: usize) -> usize {
+        self.outcomes.get(task).map_or(0, VecDeque::len)
+    }
+
     /// Success rate of `task` over its window (0 before its first episode).
     pub fn success_rate(&self, task: usize) -> f32 {
         match self.outcomes.get(task) {
@@ -93,6 +98,9 @@ mod tests {
         c.record(0, true);
         c.record(0, true);
         assert_eq!(c.success_rate(0), 1.0);
+        assert_eq!(c.episodes(0), 2);
         assert_eq!(TaskCurriculum::new(2).success_rate(1), 0.0);
+        assert_eq!(TaskCurriculum::new(2).episodes(1), 0);
+        assert_eq!(c.episodes(5), 0);
     }
 }

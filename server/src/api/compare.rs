@@ -374,6 +374,7 @@ mod tests {
             per_objective: BTreeMap::new(),
             per_task: BTreeMap::new(),
             outcomes: BTreeMap::new(),
+            hold_s: None,
         };
         let (a, b, c) = (report(0.5, 100.0), report(0.9, 120.0), report(0.9, 90.0));
         let best = best(&[Some(&a), None, Some(&b), Some(&c)], &[]);
@@ -418,6 +419,7 @@ mod tests {
             per_objective: BTreeMap::new(),
             per_task: BTreeMap::new(),
             outcomes: BTreeMap::new(),
+            hold_s: None,
         };
         (job, report)
     }

@@ -27,6 +27,8 @@ pub enum Metric {
     RewardSplit,
     /// Share of steps in each CRM stage, one curve per stage.
     Stages,
+    /// Training success of the tasks a run is weakest on, one curve per task.
+    Tasks,
     PolicyLoss,
     ValueLoss,
     Entropy,
@@ -36,12 +38,13 @@ pub enum Metric {
 }
 
 impl Metric {
-    pub const NAMES: [&str; 11] = [
+    pub const NAMES: [&str; 12] = [
         "success",
         "episode_length",
         "return",
         "reward_split",
         "stages",
+        "task_success",
         "policy_loss",
         "value_loss",
         "entropy",
@@ -49,12 +52,13 @@ impl Metric {
         "learning_rate",
         "steps_per_s",
     ];
-    const ALL: [Metric; 11] = [
+    const ALL: [Metric; 12] = [
         Self::Success,
         Self::EpisodeLength,
         Self::Return,
         Self::RewardSplit,
         Self::Stages,
+        Self::Tasks,
         Self::PolicyLoss,
         Self::ValueLoss,
         Self::Entropy,
@@ -77,6 +81,7 @@ impl Metric {
             Self::Return => "mean episode return",
             Self::RewardSplit => "intra-stage vs transition reward per episode",
             Self::Stages => "stage occupancy (share of steps)",
+            Self::Tasks => "weakest tasks (success over each task's last 50 episodes)",
             Self::PolicyLoss => "policy loss",
             Self::ValueLoss => "value loss",
             Self::Entropy => "entropy",
@@ -87,12 +92,13 @@ impl Metric {
     }
 
     fn y_range(self) -> Option<(f64, f64)> {
-        matches!(self, Self::Success | Self::Stages).then_some((0.0, 1.0))
+        matches!(self, Self::Success | Self::Stages | Self::Tasks).then_some((0.0, 1.0))
     }
 
     /// The curve names within one run and their values at one iteration; per-episode means
-    /// are missing (NaN) where no episode ended.
-    fn parts(self, it: &Iteration, stages: &[String]) -> Vec<(String, f64)> {
+    /// are missing (NaN) where no episode ended. `names` are the stages or the tasks that
+    /// [`Self::Stages`] and [`Self::Tasks`] draw.
+    fn parts(self, it: &Iteration, names: &[String]) -> Vec<(String, f64)> {
         let one = |v: f64| vec![(String::new(), v)];
         let ended = |v: f64| if it.episodes > 0 { v } else { f64::NAN };
         match self {
@@ -103,9 +109,18 @@ impl Metric {
                 ("intra-stage".into(), ended(it.mean_intra_return)),
                 ("transition".into(), ended(it.mean_transition_return)),
             ],
-            Self::Stages => stages
+            Self::Stages => names
                 .iter()
                 .map(|s| (s.clone(), it.stage_mix.get(s).copied().unwrap_or(0.0)))
+                .collect(),
+            Self::Tasks => names
+                .iter()
+                .map(|t| {
+                    (
+                        t.clone(),
+                        it.task_success.get(t).copied().unwrap_or(f64::NAN),
+                    )
+                })
                 .collect(),
             Self::PolicyLoss => one(it.policy_loss),
             Self::ValueLoss => one(it.value_loss),
@@ -115,6 +130,28 @@ impl Metric {
             Self::StepsPerS => one(it.steps_per_s),
         }
     }
+}
+
+/// Tasks a `task_success` chart draws per run: the run's weakest at its last iteration.
+const WEAKEST_TASKS: usize = 6;
+
+/// The `count` tasks with the lowest training success at the run's last iteration that has
+/// any (ties by name).
+fn weakest_tasks(iterations: &[Iteration], count: usize) -> Vec<String> {
+    let Some(last) = iterations
+        .iter()
+        .rev()
+        .find(|it| !it.task_success.is_empty())
+    else {
+        return Vec::new();
+    };
+    let mut tasks: Vec<(&String, f64)> = last.task_success.iter().map(|(t, s)| (t, *s)).collect();
+    tasks.sort_by(|a, b| a.1.total_cmp(&b.1).then_with(|| a.0.cmp(b.0)));
+    tasks
+        .into_iter()
+        .take(count)
+        .map(|(t, _)| t.clone())
+        .collect()
 }
 
 /// The x axis of a training curve.
@@ -279,12 +316,21 @@ pub async fn chart(
             .collect();
         curves.push((job, iterations));
     }
-    let stages: Vec<String> = curves
-        .iter()
-        .flat_map(|(_, its)| its.iter().flat_map(|it| it.stage_mix.keys().cloned()))
-        .collect::<BTreeSet<_>>()
-        .into_iter()
-        .collect();
+    let names: Vec<String> = if metric == Metric::Tasks {
+        curves
+            .iter()
+            .flat_map(|(_, its)| weakest_tasks(its, WEAKEST_TASKS))
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect()
+    } else {
+        curves
+            .iter()
+            .flat_map(|(_, its)| its.iter().flat_map(|it| it.stage_mix.keys().cloned()))
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect()
+    };
 
     // Runs, or groups of seeds, in the order first named.
     let mut groups: Vec<(String, Vec<usize>)> = Vec::new();
@@ -323,7 +369,7 @@ pub async fn chart(
             let per_iteration: Vec<Vec<(String, f64)>> = curves[m]
                 .1
                 .iter()
-                .map(|it| metric.parts(it, &stages))
+                .map(|it| metric.parts(it, &names))
                 .collect();
             let count = per_iteration.first().map_or(0, Vec::len);
             for p in 0..count {
@@ -374,4 +420,31 @@ pub async fn chart(
         svg,
     )
         .into_response())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn iteration(tasks: &[(&str, f64)]) -> Iteration {
+        Iteration {
+            task_success: tasks.iter().map(|(t, s)| (t.to_string(), *s)).collect(),
+            ..Iteration::default()
+        }
+    }
+
+    #[test]
+    fn the_task_chart_draws_the_weakest_tasks_of_the_last_iteration() {
+        let its = vec![
+            iteration(&[("a", 0.0), ("b", 0.0), ("c", 0.0)]),
+            iteration(&[("a", 0.9), ("b", 0.2), ("c", 0.5)]),
+            // An iteration before any episode ended reports no tasks.
+            Iteration::default(),
+        ];
+        assert_eq!(weakest_tasks(&its, 2), ["b", "c"]);
+        assert!(weakest_tasks(&[Iteration::default()], 2).is_empty());
+        let parts = Metric::Tasks.parts(&its[0], &["b".into(), "z".into()]);
+        assert_eq!(parts[0], ("b".to_string(), 0.0));
+        assert!(parts[1].1.is_nan(), "a task not drawn yet is a gap");
+    }
 }

@@ -98,6 +98,8 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
             check_task(&spec.task, &spec.tasks, &spec.topology)?;
             check_record(&spec.record)?;
             check_imitation(&spec)?;
+            crm_api::jobs::check_hold_s(spec.hold_s)
+                .map_err(|message| ApiError::invalid("hold_s", message))?;
             spec.config
                 .validate()
                 .map_err(|e| ApiError::invalid(format!("config.{}", e.field), e.message))?;
@@ -180,6 +182,8 @@ pub(super) fn eval_spec(catalog: &crm_api::Catalog, fields: Value) -> Result<Eva
     }
     check_task(catalog, &spec.task, &spec.tasks, &spec.topology)?;
     check_record(&spec.record)?;
+    crm_api::jobs::check_hold_s(spec.hold_s)
+        .map_err(|message| ApiError::invalid("hold_s", message))?;
     Ok(spec)
 }
 

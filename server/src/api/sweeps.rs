@@ -22,7 +22,7 @@ use crate::AppState;
 use crate::store::NewJob;
 
 /// Top-level fields of a training spec an axis may vary (besides `config.KEY`, `sac.KEY`).
-const AXES: [&str; 11] = [
+const AXES: [&str; 12] = [
     "algorithm",
     "seed",
     "steps",
@@ -32,6 +32,7 @@ const AXES: [&str; 11] = [
     "envs",
     "objective",
     "curriculum",
+    "hold_s",
     "imitation",
     "record",
 ];

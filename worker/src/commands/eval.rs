@@ -56,6 +56,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         record: None,
         objective: args.env.protocol,
         deterministic: args.deterministic,
+        hold_s: args.env.hold_s,
     };
     let (report, mut value) = match &args.coordinator {
         Some(url) => remote(url, &args, &spec)?,

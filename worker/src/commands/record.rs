@@ -75,6 +75,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         record: Some(record),
         objective: args.env.protocol,
         deterministic: false,
+        hold_s: args.env.hold_s,
     };
     let mut episode = None;
     evaluate(

@@ -106,6 +106,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         imitation,
         objective: args.env.protocol,
         curriculum: args.curriculum,
+        hold_s: args.env.hold_s,
     };
     let mut trainer = Trainer::new(spec.clone(), &args.env, args.resume.as_deref(), None)?;
     let bar = indicatif::ProgressBar::new(0);
@@ -152,11 +153,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             .map(|(name, share)| format!("{name} {:.0}%", 100.0 * share))
             .collect();
         let message = format!(
-            "success(last 100) {:.2}  return {:.1}  length {:.1}  [{}]",
+            "success(last 100) {:.2}  return {:.1}  length {:.1}  [{}]{}",
             it.success_rate_last_100,
             it.mean_return,
             it.mean_episode_length,
-            mix.join(", ")
+            mix.join(", "),
+            weakest(&it.task_success, 3)
         );
         if bar.is_hidden() {
             // Not a terminal (a log file, CI): one line per iteration instead of a bar.
@@ -172,10 +174,17 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
     }
     if trainer.stopped_early() {
-        bar.println(format!(
-            "early stop: the last {} episodes reached the success threshold",
+        let line = format!(
+            "early stop at {} steps: the last {} episodes reached the success threshold",
+            trainer.steps(),
             trainer.early_stop_window()
-        ));
+        );
+        // A hidden bar (a log file) prints nothing of its own.
+        if bar.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            bar.println(line);
+        }
     }
     bar.finish();
     trainer.save(&checkpoint)?;
@@ -185,4 +194,40 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         metrics_path.display()
     );
     Ok(())
+}
+
+/// The `count` tasks with the lowest training success (`  weakest: bowl-lift 0.12, ...`), or
+/// nothing for a run on fewer tasks than that.
+fn weakest(task_success: &std::collections::BTreeMap<String, f64>, count: usize) -> String {
+    if task_success.len() <= count {
+        return String::new();
+    }
+    let mut tasks: Vec<(&String, f64)> = task_success.iter().map(|(t, s)| (t, *s)).collect();
+    tasks.sort_by(|a, b| a.1.total_cmp(&b.1).then_with(|| a.0.cmp(b.0)));
+    let listed: Vec<String> = tasks
+        .iter()
+        .take(count)
+        .map(|(task, success)| format!("{task} {success:.2}"))
+        .collect();
+    format!("  weakest: {}", listed.join(", "))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_weakest_tasks_are_listed_lowest_first() {
+        let tasks: std::collections::BTreeMap<String, f64> = [
+            ("a-lift", 0.9),
+            ("b-pull", 0.1),
+            ("c-press", 1.0),
+            ("d-twist", 0.1),
+        ]
+        .into_iter()
+        .map(|(t, s)| (t.to_string(), s))
+        .collect();
+        assert_eq!(weakest(&tasks, 2), "  weakest: b-pull 0.10, d-twist 0.10");
+        assert_eq!(weakest(&tasks, 4), "");
+    }
 }

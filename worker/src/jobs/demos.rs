@@ -153,7 +153,7 @@ pub fn imitate(
     let benchmark = env.benchmark()?;
     let machine = env.machine()?;
     let choice = EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
-    let config = env.config_for(spec.objective);
+    let config = env.config_for(spec.objective, spec.hold_s);
     let source = DemoSource {
         benchmark: &benchmark,
         config: &config,

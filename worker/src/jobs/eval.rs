@@ -170,7 +170,10 @@ pub fn evaluate(
     let mut policy = LoadedPolicy::load(path, env)?;
     let (algorithm, trained_steps) = (policy.algorithm.clone(), policy.trained_steps);
     let machine = policy.machine.clone();
-    let mut grasp = GraspEnv::new(benchmark.clone(), env.config_for(spec.objective));
+    let mut grasp = GraspEnv::new(
+        benchmark.clone(),
+        env.config_for(spec.objective, spec.hold_s),
+    );
     super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?.apply(&mut grasp)?;
     let recorded = crate::record::Recorded::new(grasp, machine.clone(), recorder);
     let mut crm_env = crm::CrmEnv::new(machine, recorded, crm::RewardMode::Crm);
@@ -252,5 +255,6 @@ pub fn evaluate(
             .collect(),
         per_task: task_sums.into_iter().map(|(t, s)| (t, s.row())).collect(),
         outcomes: overall.outcomes,
+        hold_s: spec.hold_s,
     })
 }

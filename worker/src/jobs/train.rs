@@ -43,8 +43,11 @@ pub struct Trainer {
     done: u64,
     iteration: u64,
     stopped_early: bool,
-    /// Per-task success driving the task weights, when the job asks for a curriculum.
-    curriculum: Option<TaskCurriculum>,
+    /// Per-task success over each task's last training episodes: logged every iteration,
+    /// and the task weights when the job asks for a curriculum.
+    tasks: TaskCurriculum,
+    task_ids: Vec<String>,
+    curriculum: bool,
 }
 
 impl Trainer {
@@ -128,7 +131,10 @@ impl Trainer {
         };
         let envs = (0..env_count)
             .map(|k| {
-                let mut grasp = GraspEnv::new(benchmark.clone(), env.config_for(spec.objective));
+                let mut grasp = GraspEnv::new(
+                    benchmark.clone(),
+                    env.config_for(spec.objective, spec.hold_s),
+                );
                 choice.apply(&mut grasp)?;
                 let recorder = if k == 0 { recorder.clone() } else { None };
                 Ok(crm::CrmEnv::new(
@@ -142,11 +148,10 @@ impl Trainer {
         let stage_names = (0..layout.stages)
             .map(|s| machine.stage_name(s).to_string())
             .collect();
-        let curriculum = spec
-            .curriculum
-            .then(|| TaskCurriculum::new(benchmark.tasks.len()));
         Ok(Self {
-            curriculum,
+            tasks: TaskCurriculum::new(benchmark.tasks.len()),
+            task_ids: benchmark.tasks.iter().map(|t| t.id.clone()).collect(),
+            curriculum: spec.curriculum,
             early_stop: EarlyStop::new(window, threshold),
             spec,
             envs,
@@ -238,13 +243,13 @@ impl Trainer {
         for episode in &rollout.episodes {
             self.stopped_early |= self.early_stop.record(episode.success);
         }
-        if let Some(curriculum) = &mut self.curriculum {
-            for episode in &rollout.episodes {
-                if let Some(task) = episode.tag {
-                    curriculum.record(task, episode.success);
-                }
+        for episode in &rollout.episodes {
+            if let Some(task) = episode.tag {
+                self.tasks.record(task, episode.success);
             }
-            let weights = curriculum.weights();
+        }
+        if self.curriculum {
+            let weights = self.tasks.weights();
             for env in self.envs.envs_mut() {
                 env.env_mut()
                     .inner_mut()
@@ -292,6 +297,13 @@ impl Trainer {
             approx_kl: f64::from(stats.approx_kl),
             clipfrac: f64::from(stats.clipfrac),
             learning_rate: stats.learning_rate,
+            task_success: self
+                .task_ids
+                .iter()
+                .enumerate()
+                .filter(|&(task, _)| self.tasks.episodes(task) > 0)
+                .map(|(task, id)| (id.clone(), f64::from(self.tasks.success_rate(task))))
+                .collect(),
         };
         if let Some(recorder) = &self.recorder {
             lock(recorder).log_iteration(&iteration);

@@ -236,6 +236,9 @@ pub fn log_iteration(rec: &RecordingStream, it: &crm_api::Iteration) -> Recordin
     for (stage, share) in &it.stage_mix {
         scalar(&format!("training/stage_mix/{stage}"), *share)?;
     }
+    for (task, success) in &it.task_success {
+        scalar(&format!("training/task_success/{task}"), *success)?;
+    }
     scalar("training/loss/policy", it.policy_loss)?;
     scalar("training/loss/value", it.value_loss)?;
     scalar("training/entropy", it.entropy)?;
