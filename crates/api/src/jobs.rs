@@ -242,6 +242,18 @@ pub struct Iteration {
     pub task_success: BTreeMap<String, f64>,
 }
 
+/// The `count` tasks of an iteration's `task_success` with the lowest success, lowest first
+/// (ties by task id): what `crm train` prints and the run page charts.
+pub fn weakest_tasks(task_success: &BTreeMap<String, f64>, count: usize) -> Vec<(&str, f64)> {
+    let mut tasks: Vec<(&str, f64)> = task_success
+        .iter()
+        .map(|(task, success)| (task.as_str(), *success))
+        .collect();
+    tasks.sort_by(|a, b| a.1.total_cmp(&b.1).then_with(|| a.0.cmp(b.0)));
+    tasks.truncate(count);
+    tasks
+}
+
 /// One row of Table I.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Row {
@@ -408,6 +420,16 @@ mod tests {
         let mean: EvalSpec = serde_json::from_str(r#"{"deterministic": true}"#).expect("eval");
         assert!(mean.deterministic);
         assert!(serde_json::from_str::<EvalSpec>(r#"{"deterministic": "yes"}"#).is_err());
+        // The weakest tasks, lowest first, ties by id.
+        let tasks: BTreeMap<String, f64> = [("a", 0.9), ("b", 0.1), ("c", 1.0), ("d", 0.1)]
+            .into_iter()
+            .map(|(t, s)| (t.to_string(), s))
+            .collect();
+        assert_eq!(
+            weakest_tasks(&tasks, 3),
+            [("b", 0.1), ("d", 0.1), ("a", 0.9)]
+        );
+        assert_eq!(weakest_tasks(&tasks, 9).len(), 4);
         // The steady hold: the paper's 5 s unless asked, within range.
         assert_eq!(eval.hold_s, None);
         assert!(check_hold_s(None).is_ok());

@@ -145,12 +145,9 @@ fn weakest_tasks(iterations: &[Iteration], count: usize) -> Vec<String> {
     else {
         return Vec::new();
     };
-    let mut tasks: Vec<(&String, f64)> = last.task_success.iter().map(|(t, s)| (t, *s)).collect();
-    tasks.sort_by(|a, b| a.1.total_cmp(&b.1).then_with(|| a.0.cmp(b.0)));
-    tasks
+    crm_api::jobs::weakest_tasks(&last.task_success, count)
         .into_iter()
-        .take(count)
-        .map(|(t, _)| t.clone())
+        .map(|(task, _)| task.to_string())
         .collect()
 }
 

@@ -202,11 +202,8 @@ fn weakest(task_success: &std::collections::BTreeMap<String, f64>, count: usize)
     if task_success.len() <= count {
         return String::new();
     }
-    let mut tasks: Vec<(&String, f64)> = task_success.iter().map(|(t, s)| (t, *s)).collect();
-    tasks.sort_by(|a, b| a.1.total_cmp(&b.1).then_with(|| a.0.cmp(b.0)));
-    let listed: Vec<String> = tasks
+    let listed: Vec<String> = crm_api::jobs::weakest_tasks(task_success, count)
         .iter()
-        .take(count)
         .map(|(task, success)| format!("{task} {success:.2}"))
         .collect();
     format!("  weakest: {}", listed.join(", "))
