@@ -103,7 +103,8 @@ impl EnvArgs {
     }
 
     /// The world's settings with the protocol of `objective` and, when given, `hold_s`
-    /// seconds of steady hold (else `--hold-s`, else the paper's 5 s).
+    /// seconds of steady hold (a job's; the CLI commands copy `--hold-s` into their spec),
+    /// else the paper's 5 s.
     pub fn config_for(&self, objective: ObjectiveMode, hold_s: Option<f32>) -> SimConfig {
         let mut config = if self.no_randomization {
             SimConfig::deterministic()
@@ -111,7 +112,7 @@ impl EnvArgs {
             SimConfig::default()
         };
         config.protocol = protocol(objective);
-        if let Some(hold) = hold_s.or(self.hold_s) {
+        if let Some(hold) = hold_s {
             config.hold_s = hold;
         }
         config.finger_actions = match self.finger_actions {
