@@ -65,36 +65,50 @@ def task_map(rows, marks, title, path):
 
 
 def main():
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = plt.subplots(1, 2, figsize=(14, 4.5), gridspec_kw={"width_ratios": [1.5, 1]})
     ax = axes[0]
     two_phase = ("benchmark-p.metrics.jsonl", "benchmark-q.metrics.jsonl")
     if all((DOCS / name).exists() for name in two_phase):
         rows, marks = phases(*two_phase)
-        curve(ax, rows, "wall_s", "run q: 1 s hold to 100%, then the 5 s hold, seed 1", color="black")
+        curve(ax, rows, "wall_s", "run q (v2): 1 s hold, then 5 s, seed 1", color="black", alpha=0.4, linewidth=0.8)
         task_map(
             rows,
             marks,
             "run q per task: a 1 s hold until the dashed line (run p), then the paper's 5 s",
             "tasks-q.png",
         )
+    for name, label, style in [
+        ("benchmark-t.metrics.jsonl", "run t (v4), shipped: early stop 99% of 1,000, seed 1", {"color": "crimson", "linewidth": 2}),
+        ("benchmark-u.metrics.jsonl", "run u (v4): run t's command, seed 0", {"color": "navy", "linewidth": 2}),
+        ("benchmark-r.metrics.jsonl", "run r (v4): early stop 99% of 100, seed 1", {"color": "gold", "linewidth": 2}),
+    ]:
+        if (DOCS / name).exists():
+            curve(ax, load(name), "wall_s", label, **style)
+    if (DOCS / "benchmark-t.metrics.jsonl").exists():
+        task_map(
+            load("benchmark-t.metrics.jsonl"),
+            [],
+            "run t per task, the shipped model (environment v4, friction anchors)",
+            "tasks-t.png",
+        )
     for name, label in [
-        ("benchmark-k.metrics.jsonl", "run k, the shipped model: 3.75 M steps, seed 1"),
+        ("benchmark-k.metrics.jsonl", "run k (v2, shipped before): seed 1"),
         ("benchmark-l.metrics.jsonl", "run l: run k's command, seed 0"),
         ("benchmark-m.metrics.jsonl", "run m: run k's command, seed 2"),
         ("benchmark-n.metrics.jsonl", "run n: run k's command, seed 3"),
         ("benchmark-j.metrics.jsonl", "run j: 4.6 M steps, seed 1"),
-        ("benchmark-i.metrics.jsonl", "run i: task curriculum (hard tasks drawn more), seed 0"),
+        ("benchmark-i.metrics.jsonl", "run i: task curriculum, seed 0"),
         ("benchmark-h.metrics.jsonl", "run h: uniform tasks, lock-step rollouts"),
         ("benchmark-g.metrics.jsonl", "run g (earlier rules)"),
     ]:
         if (DOCS / name).exists():
-            curve(ax, load(name), "wall_s", label)
+            curve(ax, load(name), "wall_s", label, alpha=0.4, linewidth=0.8)
     ax.set_xlabel("wall-clock minutes, 2 cores")
     ax.set_ylabel("success rate, last 100 training episodes")
-    ax.set_title("CRM-PPO from scratch, all 26 tasks")
+    ax.set_title("CRM-PPO from scratch, all 26 tasks (bold: environment v4, faint: v2)")
     ax.set_ylim(0, 1)
     ax.grid(alpha=0.3)
-    ax.legend(loc="lower right", fontsize=7)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7)
 
     ax = axes[1]
     for name, label in [

@@ -131,7 +131,7 @@ fn checkpoints_made_elsewhere_are_stored_once_checked_and_evaluated_remotely() {
         ),
         (
             "/api/v1/checkpoints",
-            patched(&model, "obs38/v2", "obs38/v9"),
+            patched(&model, "obs38/v4", "obs38/v9"),
             Some(TOKEN),
             422,
             "body",
@@ -171,7 +171,7 @@ fn checkpoints_made_elsewhere_are_stored_once_checked_and_evaluated_remotely() {
     let mismatch = upload(
         &addr,
         "/api/v1/checkpoints",
-        &patched(&model, "obs38/v2", "obs38/v9"),
+        &patched(&model, "obs38/v4", "obs38/v9"),
         Some(TOKEN),
     );
     let message = mismatch.json()["error"]["message"]

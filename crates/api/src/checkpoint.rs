@@ -12,7 +12,7 @@ use crate::Algorithm;
 
 /// The environment version the workers of this build run (`grasp_sim::ENV_VERSION`, which a
 /// worker test keeps equal): checkpoints of another version are refused.
-pub const ENV_VERSION: &str = "grasp-sim/0.1.0/obs38/v2";
+pub const ENV_VERSION: &str = "grasp-sim/0.1.0/obs38/v4";
 
 /// The format tag in every checkpoint header (`crm_learn::checkpoint::FORMAT`).
 pub const FORMAT: &str = "crm-grasp-checkpoint/1";

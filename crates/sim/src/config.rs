@@ -2,6 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::stiction::StictionConfig;
+
 /// Domain randomization (paper, section V-A: "random noise of +/-3 mm in object position,
 /// +/-11.5 deg in object orientation, and 0.02 rad in joint positions").
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -108,6 +110,9 @@ pub struct SimConfig {
     /// Smallest summed normal force (N) with which a finger or a hand part counts as
     /// touching in the ready test. Default 0.3 N.
     pub ready_finger_force: f32,
+    /// Static friction that holds position between the hand and the object: friction anchors
+    /// (environment v4; see `stiction.rs`). On by default.
+    pub stiction: StictionConfig,
 }
 
 impl Default for SimConfig {
@@ -132,6 +137,7 @@ impl Default for SimConfig {
             finger_actions: FingerActions::default(),
             script_limit_s: 10.0,
             ready_finger_force: 0.3,
+            stiction: StictionConfig::default(),
         }
     }
 }

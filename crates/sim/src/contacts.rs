@@ -44,6 +44,17 @@ impl ContactMetrics {
         self.points.len()
     }
 
+    /// The bodies (other than the object) with at least one contact, each once.
+    pub fn touching_bodies(&self) -> Vec<RigidBodyHandle> {
+        let mut bodies: Vec<RigidBodyHandle> = Vec::new();
+        for body in self.points.iter().filter_map(|p| p.other_body) {
+            if !bodies.contains(&body) {
+                bodies.push(body);
+            }
+        }
+        bodies
+    }
+
     /// `o_cone`: there is contact and every contact sticks inside its friction cone with the
     /// margin. A contact is one body touching the object (a finger link, the palm, the table):
     /// rapier splits such a patch into several points and may saturate friction at a lightly

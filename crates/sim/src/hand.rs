@@ -152,12 +152,14 @@ impl Hand {
         pose: Pose,
         shape: &[FingerShape; 5],
         joint_offsets: Vec<Vec<f32>>,
+        hooks: ActiveHooks,
     ) -> Self {
         let mount = world.insert_body(RigidBodyBuilder::kinematic_position_based().pose(pose));
         let palm_body = RigidBodyBuilder::dynamic().pose(pose).gravity_scale(0.0);
         let palm_collider = ColliderBuilder::cuboid(PALM_HALF[0], PALM_HALF[1], PALM_HALF[2])
             .mass(PALM_MASS)
             .friction(HAND_FRICTION)
+            .active_hooks(hooks)
             .collision_groups(hand_groups());
         let (palm, _) = world.insert(palm_body, palm_collider);
         let mut wrist = GenericJointBuilder::new(JointAxesMask::ANG_AXES);
@@ -194,6 +196,7 @@ impl Hand {
                     .translation(Vec3::new(spec.length * 0.5, 0.0, 0.0))
                     .mass(spec.mass)
                     .friction(HAND_FRICTION)
+                    .active_hooks(hooks)
                     .collision_groups(hand_groups());
                 let (handle, _) = world.insert(body, collider);
                 let offset = joint_offsets

@@ -34,6 +34,7 @@ pub mod ready;
 pub mod scene;
 pub mod script;
 pub mod spec;
+pub mod stiction;
 pub mod view;
 
 pub use benchmark::Benchmark;
@@ -43,5 +44,6 @@ pub use error::{Error, Result};
 
 /// Version of the environment's dynamics and observation layout; checkpoints record it.
 /// `v2`: the paper's ready test and scripted objective execution, and policies that carry
-/// their observation normalizer.
-pub const ENV_VERSION: &str = concat!("grasp-sim/", env!("CARGO_PKG_VERSION"), "/obs38/v2");
+/// their observation normalizer. `v4`: friction anchors between the hand and the object
+/// (`stiction.rs`). (`v3` was a finger-range candidate, never shipped: docs/BENCHMARKS.md.)
+pub const ENV_VERSION: &str = concat!("grasp-sim/", env!("CARGO_PKG_VERSION"), "/obs38/v4");

@@ -7,6 +7,7 @@ use rapier3d::prelude::*;
 use crate::benchmark::{Axis, Object, Shape, Task};
 use crate::config::SimConfig;
 use crate::hand::{GRASP_POINT, HAND_GROUP, Hand, OBJECT_GROUP, TABLE_GROUP};
+use crate::stiction::Stiction;
 
 /// Half extents of the table top; its surface is the plane z = 0.
 pub const TABLE_HALF: [f32; 3] = [0.5, 0.5, 0.02];
@@ -18,6 +19,8 @@ const ANCHOR_BRAKE_DAMPING: f32 = 50.0;
 pub struct Scene {
     pub world: PhysicsWorld,
     pub hand: Hand,
+    /// The friction anchors between the hand and the object (see `stiction.rs`).
+    pub stiction: Stiction,
     pub object: RigidBodyHandle,
     pub table: ColliderHandle,
     /// The object's pose after randomization, at reset.
@@ -168,10 +171,15 @@ pub fn build(task: &Task, object: &Object, config: &SimConfig, rng: &mut ChaCha8
         Pose::from_parts(mount_start, hand_rotation),
         &shape,
         joint_offsets,
+        Stiction::hooks(&config.stiction),
     );
+    let (min, max) = object.bounds();
+    let radius = Vec3::from(min).length().max(Vec3::from(max).length());
+    let stiction = Stiction::new(config.stiction, handle, radius);
     Scene {
         world,
         hand,
+        stiction,
         object: handle,
         table,
         object_start,

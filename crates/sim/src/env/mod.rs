@@ -355,13 +355,16 @@ impl GraspEnv {
             scene
                 .hand
                 .move_mount(&mut scene.world, start.lerp(target, alpha));
-            scene.world.step();
+            scene.world.step_with_events(&scene.stiction, &());
             last = object_contacts(&scene.world, object, |_, collider| {
                 collider
                     .collision_groups()
                     .memberships
                     .intersects(HAND_GROUP)
             });
+            scene
+                .stiction
+                .update(&scene.world.bodies, &last.touching_bodies());
             averaged.accumulate(&last);
         }
         averaged.scale(1.0 / substeps as f32);
