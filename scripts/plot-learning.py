@@ -78,8 +78,9 @@ def main():
             "tasks-q.png",
         )
     for name, label, style in [
-        ("benchmark-t.metrics.jsonl", "run t (v4), shipped: early stop 99% of 1,000, seed 1", {"color": "crimson", "linewidth": 2}),
-        ("benchmark-u.metrics.jsonl", "run u (v4): run t's command, seed 0", {"color": "navy", "linewidth": 2}),
+        ("benchmark-t.metrics.jsonl", "run t (v4), shipped: early stop 99% of 1,000, seed 1 (logged: last 1,000)", {"color": "crimson", "linewidth": 2}),
+        ("benchmark-u.metrics.jsonl", "run u (v4): run t's command, seed 0 (logged: last 1,000)", {"color": "navy", "linewidth": 2}),
+        ("benchmark-v.metrics.jsonl", "run v (v4): run t's command, seed 2 (logged: last 1,000)", {"color": "teal", "linewidth": 2}),
         ("benchmark-r.metrics.jsonl", "run r (v4): early stop 99% of 100, seed 1", {"color": "gold", "linewidth": 2}),
     ]:
         if (DOCS / name).exists():

@@ -221,6 +221,9 @@ pub struct Iteration {
     /// Episodes that ended in this iteration, and how many of them succeeded.
     pub episodes: u64,
     pub successes: u64,
+    /// Success over the last 100 training episodes, whatever the early-stop window (until
+    /// 2026-11-24 the window's rate: the logs of runs t, u and v in docs/learning/ hold the
+    /// rate over 1,000).
     pub success_rate_last_100: f64,
     pub mean_return: f64,
     /// The return split into intra-stage and transition rewards, per episode.

@@ -23,8 +23,8 @@ pub struct StictionConfig {
     /// On by default (environment v4).
     pub enabled: bool,
     /// Drift closed per second (1/s). Default 60: a quarter of the drift per physics step
-    /// (1/240 s), stable, and the best of 3-100 measured (docs/BENCHMARKS.md, "Friction
-    /// anchors").
+    /// (1/240 s), stable, and within 0.01 of the best of 3-100 measured (docs/BENCHMARKS.md,
+    /// "Friction anchors").
     pub gain: f32,
     /// Fastest correction (m/s). Default 0.2 (measured with `gain`).
     pub max_speed: f32,
@@ -52,7 +52,7 @@ pub struct Stiction {
     object: RigidBodyHandle,
     /// Each anchored hand body and the object's pose in that body's frame when it stuck.
     anchors: Vec<(RigidBodyHandle, Pose)>,
-    /// The largest distance from the object's centre of mass to its surface (m), to bound
+    /// A bound of the distance from the object's body origin to its surface (m), to bound
     /// how far a contact moves when the object turns.
     radius: f32,
 }
@@ -157,7 +157,8 @@ impl PhysicsHooks for Stiction {
             let error = stuck - point;
             let tangential = error - normal * normal.dot(error);
             let velocity = (tangential * gain).clamp_length_max(max_speed);
-            // The solver drives `v2 - v1` at the contact towards `tangent_velocity`.
+            // The solver drives `v2 - v1` at the contact towards `tangent_velocity` (the unit
+            // test below fails with the other sign).
             contact.tangent_velocity = if object_first { -velocity } else { velocity };
         }
     }

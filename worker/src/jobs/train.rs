@@ -35,6 +35,8 @@ pub struct Trainer {
     env_count: usize,
     learner: Learner,
     early_stop: EarlyStop,
+    /// The last 100 episodes, for `success_rate_last_100` whatever the early-stop window.
+    last_100: EarlyStop,
     layout: Layout,
     spec_hash: String,
     stage_names: Vec<String>,
@@ -153,6 +155,7 @@ impl Trainer {
             task_ids: benchmark.tasks.iter().map(|t| t.id.clone()).collect(),
             curriculum: spec.curriculum,
             early_stop: EarlyStop::new(window, threshold),
+            last_100: EarlyStop::new(100, 1.0),
             spec,
             envs,
             recorder,
@@ -242,6 +245,7 @@ impl Trainer {
         self.iteration += 1;
         for episode in &rollout.episodes {
             self.stopped_early |= self.early_stop.record(episode.success);
+            self.last_100.record(episode.success);
         }
         for episode in &rollout.episodes {
             if let Some(task) = episode.tag {
@@ -270,7 +274,7 @@ impl Trainer {
             steps_per_s: (self.done - self.start_steps) as f64 / elapsed.max(1e-9),
             episodes,
             successes: rollout.episodes.iter().filter(|e| e.success).count() as u64,
-            success_rate_last_100: f64::from(self.early_stop.success_rate()),
+            success_rate_last_100: f64::from(self.last_100.success_rate()),
             mean_return: per_episode(
                 rollout
                     .episodes
