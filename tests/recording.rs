@@ -297,7 +297,7 @@ fn a_job_streams_live_to_a_viewer() {
         return;
     }
     let rerun = rerun_cli().expect(
-        "the rerun CLI is needed: `pip install rerun-sdk==0.36.3` (or set RERUN_BIN), or set CRM_SKIP_VIEWER=1",
+        "the rerun CLI is needed: run the tests with `scripts/test`, which installs it (or `pip install rerun-sdk==0.36.3`, or set RERUN_BIN), or set CRM_SKIP_VIEWER=1",
     );
     let dir = TempDir::new("record-live");
     let saved = dir.0.join("live.rrd");

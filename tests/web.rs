@@ -3,9 +3,11 @@
 //! (two seeds of one configuration and another algorithm), their evaluations and evaluations
 //! with forced topologies; then `web/tests/dashboard.mjs` (playwright-core driving Debian's
 //! `/usr/bin/chromium`) loads every page, submits a job through the form, compares runs and
-//! deletes one from its page; a small sweep shows its Table I.
+//! deletes one from its page; a small sweep shows its Table I. Every page must load without
+//! a console error or a refused request (but where a check provokes one on purpose) and
+//! declare an icon that loads.
 //!
-//! Needs `node`, `npm ci --prefix web` and Chromium (`.ci/run` installs them). Set
+//! Needs `node`, `npm ci --prefix web` and Chromium (`scripts/test` installs them). Set
 //! `CRM_SKIP_BROWSER=1` to skip on a machine without them; `CRM_SCREENSHOTS=DIR` keeps a PNG
 //! of each page.
 
@@ -44,7 +46,7 @@ fn the_dashboard_works_in_chromium() {
     }
     assert!(
         web.join("node_modules/playwright-core").exists(),
-        "run `npm ci --prefix web` first (and `apt-get install chromium`), or set CRM_SKIP_BROWSER=1"
+        "run the tests with `scripts/test`, which installs Node.js, Chromium and playwright-core (or `npm ci --prefix web` and `apt-get install chromium`), or set CRM_SKIP_BROWSER=1"
     );
 
     let data = TempDir::new("web");
@@ -141,7 +143,7 @@ fn the_dashboard_works_in_chromium() {
         "browser checks failed:\n{stdout}\n{stderr}"
     );
     assert!(
-        stdout.contains("11 of 11 browser checks passed"),
+        stdout.contains("12 of 12 browser checks passed"),
         "{stdout}"
     );
     println!("{stdout}");

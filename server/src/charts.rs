@@ -160,14 +160,7 @@ fn draw(svg: &mut String, chart: &Chart, series: &[Series]) -> DrawResult {
     for (k, s) in series.iter().enumerate() {
         let color = PALETTE[k % PALETTE.len()];
         if let Some(band) = &s.band {
-            let upper = s.points.iter().zip(band).map(|(&(x, y), h)| (x, y + h));
-            let lower = s
-                .points
-                .iter()
-                .zip(band)
-                .rev()
-                .map(|(&(x, y), h)| (x, y - h));
-            let outline: Vec<(f64, f64)> = upper.chain(lower).collect();
+            let outline = band_outline(&s.points, band, chart.y_range);
             plot.draw_series(std::iter::once(Polygon::new(
                 outline,
                 color.mix(0.18).filled(),
@@ -190,6 +183,23 @@ fn draw(svg: &mut String, chart: &Chart, series: &[Series]) -> DrawResult {
     }
     root.present()?;
     Ok(())
+}
+
+/// A band's outline: the upper edge left to right, then the lower edge back, clipped to a
+/// fixed y range (a success rate's ±1 std stops at 0 and 1).
+fn band_outline(
+    points: &[(f64, f64)],
+    band: &[f64],
+    y_range: Option<(f64, f64)>,
+) -> Vec<(f64, f64)> {
+    let clip = |y: f64| y_range.map_or(y, |(lo, hi)| y.clamp(lo, hi));
+    let upper = points.iter().zip(band).map(|(&(x, y), h)| (x, clip(y + h)));
+    let lower = points
+        .iter()
+        .zip(band)
+        .rev()
+        .map(|(&(x, y), h)| (x, clip(y - h)));
+    upper.chain(lower).collect()
 }
 
 /// Decimals that tell ticks about a sixth of `span` apart: `None` for k/M labels, `Some(9)`
@@ -288,6 +298,23 @@ mod tests {
         assert!(svg.matches("<polyline").count() >= 2, "{svg}");
         assert_eq!(svg.matches("<polygon").count(), 1, "{svg}");
         assert!(svg.contains("crm-ppo x2 seeds"));
+    }
+
+    #[test]
+    fn a_band_stays_inside_a_fixed_range() {
+        let points = [(0.0, 0.1), (1.0, 0.95)];
+        let band = [0.2, 0.1];
+        assert_eq!(
+            band_outline(&points, &band, Some((0.0, 1.0))),
+            [
+                (0.0, 0.30000000000000004),
+                (1.0, 1.0),
+                (1.0, 0.85),
+                (0.0, 0.0)
+            ]
+        );
+        let free = band_outline(&points, &band, None);
+        assert!(free[1].1 > 1.0 && free[3].1 < 0.0);
     }
 
     #[test]

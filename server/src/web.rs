@@ -19,6 +19,11 @@ const INDEX: &str = include_str!("../../web/index.html");
 const ASSETS: &[(&str, &str, &str)] = &[
     ("style.css", "text/css", include_str!("../../web/style.css")),
     (
+        "favicon.svg",
+        "image/svg+xml",
+        include_str!("../../web/favicon.svg"),
+    ),
+    (
         "api.js",
         "text/javascript",
         include_str!("../../web/src/api.js"),

@@ -23,7 +23,7 @@ export async function renderRun(main, idText) {
   const message = el('div', { class: 'message', role: 'status' });
   const checkpoints = el('tbody');
   const evaluations = el('div');
-  const episodes = el('div');
+  const episodes = el('div', { id: 'episodes-section' });
   const recording = el('div', { id: 'recording' });
   const deleteButton = el('button', { type: 'button', id: 'delete-run', class: 'danger', onclick: () => remove() }, 'Delete run');
   const episodesInput = el('input', { type: 'text', inputmode: 'numeric', value: '100', name: 'eval-episodes', size: 6 });
@@ -96,11 +96,15 @@ export async function renderRun(main, idText) {
     showEpisodes(d);
   }
 
-  // Training runs keep few episode summaries; evaluations keep each episode's transitions.
+  // Training runs list the episodes they record; evaluations keep each episode's
+  // transitions, and a run that records none shows its latest evaluation's.
   async function showEpisodes(d) {
     const finished = d.evaluations.find((e) => e.state === 'succeeded');
     if (d.episodes.length || !finished) {
-      episodes.replaceChildren(episodeList(d.episodes));
+      const none = d.run.kind === 'train' && !asObject(d.run.spec).record
+        ? 'A training run lists the episodes it records: none here (set "record every N episodes" when submitting).'
+        : 'No episode summaries yet.';
+      episodes.replaceChildren(episodeList(d.episodes, none));
       return;
     }
     try {
@@ -194,8 +198,8 @@ function taskFailures(outcomes) {
   return failed.length ? `: ${failed.join(', ')}` : '';
 }
 
-function episodeList(episodes) {
-  if (!episodes || !episodes.length) return el('p', { class: 'muted' }, 'No episode summaries yet.');
+function episodeList(episodes, none = 'No episode summaries yet.') {
+  if (!episodes || !episodes.length) return el('p', { class: 'muted' }, none);
   const rows = episodes.slice(-20).reverse().map((e) => {
     const d = e || {};
     const history = (d.transitions || d.history || []).map((t) => `${t.from}→${t.to} (${t.event}, ${fmtNum(t.reward, 0)})`).join(', ');

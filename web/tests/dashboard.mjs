@@ -23,10 +23,18 @@ const browser = await chromium.launch({
 const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
 const problems = [];
 page.on('pageerror', (err) => problems.push(`page error: ${err.message}`));
-// Refused requests (the form's 400s, the not-found page's 404s) are expected; scripts'
-// errors are not.
+// A refused request logs "Failed to load resource" in the console: the checks that provoke
+// refusals on purpose (the form's 400s, the not-found pages' 404s) say so, and in every other
+// check any response of 400 or more (a missing icon, a broken link) is a problem, as is any
+// other console error.
+let current = { name: '', refusals: false };
 page.on('console', (msg) => {
   if (msg.type() === 'error' && !msg.text().startsWith('Failed to load resource')) problems.push(`console: ${msg.text()}`);
+});
+page.on('response', (response) => {
+  if (response.status() >= 400 && !current.refusals) {
+    problems.push(`${response.status()} ${response.url()} (in "${current.name}")`);
+  }
 });
 
 async function shot(name) {
@@ -48,7 +56,8 @@ async function chartsDrawn(count) {
 }
 
 const checks = [];
-function check(name, body) { checks.push([name, body]); }
+/** A check; `refusals`: it provokes 4xx responses on purpose. */
+function check(name, body, { refusals = false } = {}) { checks.push([{ name, refusals }, body]); }
 
 check('jobs list shows the seeded runs live', async () => {
   await page.goto(`${base}/`);
@@ -127,6 +136,19 @@ check('the form shows API errors next to the field, then queues a job that appea
   // redraw the list while a worker reports.)
   await page.click(`#jobs tr[data-job="${id}"] button:has-text("Cancel")`);
   await page.waitForSelector(`#jobs tr[data-job="${id}"][data-state="cancelled"]`);
+}, { refusals: true });
+
+// A browser with a window asks every page for its icon (headless Chromium does not, so it is
+// checked here): without a declared one, /favicon.ico is a 404 in the console of every page.
+check('every page declares an icon that loads', async () => {
+  for (const path of ['/', `/runs/${runA}`, `/compare?runs=${runA},${runB}`, '/sweeps', '/topology', '/models']) {
+    await page.goto(`${base}${path}`);
+    const href = await page.getAttribute('link[rel="icon"]', 'href');
+    assert.ok(href, `${path}: no <link rel="icon">`);
+    const icon = await fetch(new URL(href, base));
+    assert.equal(icon.status, 200, `${path}: ${href}`);
+    assert.match(icon.headers.get('content-type'), /^image\//);
+  }
 });
 
 check('a run page draws its curves, lists checkpoints and evaluations', async () => {
@@ -156,6 +178,20 @@ check('a run page draws its curves, lists checkpoints and evaluations', async ()
   }
   assert.equal(item.includes(':'), failed.length > 0, item);
   assert.ok((await page.textContent('#evaluations td.outcomes')).length > 0, 'outcomes shown');
+  // Run a records its first two episodes: its episode list shows them with their stage
+  // transitions (not an evaluation's episodes).
+  await page.waitForSelector('#episodes tbody tr');
+  const episodes = await page.$$eval('#episodes tbody tr',
+    (trs) => trs.map((tr) => [...tr.querySelectorAll('td')].map((td) => td.textContent)));
+  const shown = JSON.stringify(episodes);
+  assert.equal(episodes.length, 2, shown);
+  for (const [task, success, length, ret] of episodes) {
+    assert.equal(task, 'mouse-press', shown);
+    assert.ok(['yes', 'no'].includes(success), shown);
+    assert.ok(Number(length) >= 1 && Number(length) <= 600, shown);
+    assert.ok(Number.isFinite(Number(ret.replace(/,/g, ''))), shown);
+  }
+  assert.doesNotMatch(await page.textContent('#episodes-section'), /From evaluation/);
   // Run a records every episode: the section offers the file and the viewer command.
   await page.waitForSelector('#recording a[href$="/recording"]');
   assert.match(await page.textContent('#recording'), new RegExp(`rerun http://.*/api/v1/jobs/${runA}/recording`));
@@ -191,7 +227,7 @@ check('a run that does not exist shows a not-found page with status 404', async 
   assert.equal(other.status(), 404);
   await page.waitForSelector('.not-found');
   await shot('not-found');
-});
+}, { refusals: true });
 
 check('comparing runs overlays curves with a seed band, Table I and the config diff', async () => {
   await page.goto(`${base}/compare?runs=${runA},${runB},${runC}`);
@@ -289,7 +325,7 @@ check('the models page lists the shipped model, refuses a file that is no checkp
   assert.equal(cancelled.status, 200);
   await page.waitForSelector('#evaluations .badge.cancelled');
   await shot('models');
-});
+}, { refusals: true });
 
 check('a sweep page shows its progress, curves per configuration and Table I with the best cells bold', async () => {
   await page.goto(`${base}/sweeps`);
@@ -332,7 +368,7 @@ check('a finished run shows its disk use and can be deleted from its page', asyn
   const jobs = await api('/api/v1/jobs?limit=10000');
   assert.ok(!jobs.jobs.some((j) => j.id === runC), 'the run left the jobs list');
   await shot('deleted');
-});
+}, { refusals: true });
 
 // Last: it frees the busy worker.
 check('a job building demonstrations shows its phase in the list and on its page', async () => {
@@ -349,7 +385,9 @@ check('a job building demonstrations shows its phase in the list and on its page
 });
 
 let failed = 0;
-for (const [name, body] of checks) {
+for (const [what, body] of checks) {
+  const { name } = what;
+  current = what;
   try {
     await body();
     console.log(`ok - ${name}`);

@@ -225,11 +225,15 @@ pub struct Iteration {
     /// 2026-11-24 the window's rate: the logs of runs t, u and v in docs/learning/ hold the
     /// rate over 1,000).
     pub success_rate_last_100: f64,
-    pub mean_return: f64,
-    /// The return split into intra-stage and transition rewards, per episode.
-    pub mean_intra_return: f64,
-    pub mean_transition_return: f64,
-    pub mean_episode_length: f64,
+    /// Means over the episodes that ended in this iteration: the return, its split into
+    /// intra-stage and transition rewards, and the length in control steps; `None` (JSON
+    /// null) when none ended. Iterations logged before 2026-11-25 hold 0 there instead, and
+    /// their split was the iteration's whole reward, unfinished episodes' too, over the
+    /// finished episodes.
+    pub mean_return: Option<f64>,
+    pub mean_intra_return: Option<f64>,
+    pub mean_transition_return: Option<f64>,
+    pub mean_episode_length: Option<f64>,
     /// Share of this iteration's steps taken in each stage.
     pub stage_mix: BTreeMap<String, f64>,
     pub policy_loss: f64,

@@ -42,6 +42,9 @@ pub struct Episode {
     pub length: usize,
     /// Intra-stage plus transition rewards, unscaled.
     pub total_return: f32,
+    /// The intra-stage and the transition part of `total_return`, unscaled.
+    pub intra_return: f32,
+    pub transition_return: f32,
     /// The environment's label for the episode ([`crm::Environment::episode_tag`]: the
     /// grasping environment's task index).
     pub tag: Option<usize>,
@@ -83,7 +86,9 @@ struct Slot<E> {
     stage: crm::StageId,
     state: Vec<f32>,
     episode: u64,
-    episode_return: f32,
+    /// The running episode's intra-stage and transition returns.
+    episode_intra: f32,
+    episode_transition: f32,
     episode_length: usize,
     buffer: Rollout,
     /// This environment's policy noise, for learners that act one environment at a time.
@@ -103,7 +108,8 @@ impl<E: crm::Environment> Slot<E> {
         mask: Vec<f32>,
     ) -> Result<()> {
         let step = self.env.step(&action).map_err(env_error)?;
-        self.episode_return += step.intra_reward + step.transition_reward;
+        self.episode_intra += step.intra_reward;
+        self.episode_transition += step.transition_reward;
         self.episode_length += 1;
         let last = step.done || step.truncated;
         let b = &mut self.buffer;
@@ -125,11 +131,14 @@ impl<E: crm::Environment> Slot<E> {
             b.episodes.push(Episode {
                 success,
                 length: self.episode_length,
-                total_return: self.episode_return,
+                total_return: self.episode_intra + self.episode_transition,
+                intra_return: self.episode_intra,
+                transition_return: self.episode_transition,
                 tag: self.env.env().episode_tag(),
             });
             self.episode += 1;
-            self.episode_return = 0.0;
+            self.episode_intra = 0.0;
+            self.episode_transition = 0.0;
             self.episode_length = 0;
             let seed = episode_seed(base_seed, k, self.episode);
             (self.stage, self.state) = self.env.reset(seed).map_err(env_error)?;
@@ -209,7 +218,8 @@ impl<E: crm::Environment + Send> VecEnv<E> {
                     stage,
                     state,
                     episode: 0,
-                    episode_return: 0.0,
+                    episode_intra: 0.0,
+                    episode_transition: 0.0,
                     episode_length: 0,
                     buffer: Rollout::default(),
                     noise: Noise::new(episode_seed(base_seed, k, u64::MAX)),

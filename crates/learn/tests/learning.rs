@@ -152,6 +152,43 @@ fn rollouts_and_updates_are_bitwise_reproducible_across_thread_counts() {
     assert_eq!(one, run(1));
 }
 
+/// An ended episode carries its own intra-stage and transition returns, and nothing of the
+/// episode still running when the rollout stops (per-episode means in the training log are
+/// over ended episodes only).
+#[test]
+fn episodes_carry_their_own_reward_split() {
+    let layout = Layout::of(env().machine());
+    let config = PpoConfig {
+        hidden: vec![8],
+        ..PpoConfig::default()
+    };
+    let mut ppo = Ppo::new(layout, config, 3).expect("ppo");
+    let mut envs = VecEnv::new(vec![env()], 7).expect("envs");
+    // 25-step episodes at most: 60 steps end at least two and leave one running.
+    let rollout = envs.collect(&mut ppo, 60).expect("rollout");
+    let (mut intra, mut transition) = (0.0f32, 0.0f32);
+    let mut ended = Vec::new();
+    for k in 0..rollout.len() {
+        intra += rollout.intra[k];
+        transition += rollout.transition[k];
+        if rollout.ended[k] {
+            ended.push((intra, transition));
+            (intra, transition) = (0.0, 0.0);
+        }
+    }
+    assert!(ended.len() >= 2 && !rollout.ended[rollout.len() - 1]);
+    assert_ne!(
+        intra, 0.0,
+        "the running episode has rewards the ended ones must not carry"
+    );
+    assert_eq!(rollout.episodes.len(), ended.len());
+    for (episode, (intra, transition)) in rollout.episodes.iter().zip(&ended) {
+        assert_eq!(episode.intra_return, *intra);
+        assert_eq!(episode.transition_return, *transition);
+        assert_eq!(episode.total_return, intra + transition);
+    }
+}
+
 #[test]
 fn a_short_seeded_sac_run_on_an_easy_task_beats_the_untrained_policy() {
     let machine = env().machine().clone();

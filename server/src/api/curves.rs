@@ -100,7 +100,7 @@ impl Metric {
     /// [`Self::Stages`] and [`Self::Tasks`] draw.
     fn parts(self, it: &Iteration, names: &[String]) -> Vec<(String, f64)> {
         let one = |v: f64| vec![(String::new(), v)];
-        let ended = |v: f64| if it.episodes > 0 { v } else { f64::NAN };
+        let ended = |v: Option<f64>| v.unwrap_or(f64::NAN);
         match self {
             Self::Success => one(it.success_rate_last_100),
             Self::EpisodeLength => one(ended(it.mean_episode_length)),

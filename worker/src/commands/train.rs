@@ -153,10 +153,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             .map(|(name, share)| format!("{name} {:.0}%", 100.0 * share))
             .collect();
         let message = format!(
-            "success(last 100) {:.2}  return {:.1}  length {:.1}  [{}]{}",
+            "success(last 100) {:.2}  return {}  length {}  [{}]{}",
             it.success_rate_last_100,
-            it.mean_return,
-            it.mean_episode_length,
+            it.mean_return.map_or("-".into(), |v| format!("{v:.1}")),
+            it.mean_episode_length
+                .map_or("-".into(), |v| format!("{v:.1}")),
             mix.join(", "),
             weakest(&it.task_success, 3)
         );

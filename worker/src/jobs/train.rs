@@ -12,6 +12,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use crm_api::{Algorithm, Iteration, TrainSpec};
 use crm_learn::checkpoint::FORMAT;
+use crm_learn::rollout::Episode;
 use crm_learn::{
     Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, Sac, TaskCurriculum, VecEnv,
 };
@@ -261,7 +262,10 @@ impl Trainer {
             }
         }
         let episodes = rollout.episodes.len() as u64;
-        let per_episode = |total: f64| total / episodes.max(1) as f64;
+        let per_episode = |value: fn(&Episode) -> f64| {
+            (episodes > 0)
+                .then(|| rollout.episodes.iter().map(value).sum::<f64>() / episodes as f64)
+        };
         let mut mix = vec![0usize; self.layout.stages];
         for &stage in &rollout.stages {
             mix[stage] += 1;
@@ -275,20 +279,10 @@ impl Trainer {
             episodes,
             successes: rollout.episodes.iter().filter(|e| e.success).count() as u64,
             success_rate_last_100: f64::from(self.last_100.success_rate()),
-            mean_return: per_episode(
-                rollout
-                    .episodes
-                    .iter()
-                    .map(|e| f64::from(e.total_return))
-                    .sum(),
-            ),
-            mean_intra_return: per_episode(rollout.intra.iter().map(|&r| f64::from(r)).sum()),
-            mean_transition_return: per_episode(
-                rollout.transition.iter().map(|&r| f64::from(r)).sum(),
-            ),
-            mean_episode_length: per_episode(
-                rollout.episodes.iter().map(|e| e.length as f64).sum(),
-            ),
+            mean_return: per_episode(|e| f64::from(e.total_return)),
+            mean_intra_return: per_episode(|e| f64::from(e.intra_return)),
+            mean_transition_return: per_episode(|e| f64::from(e.transition_return)),
+            mean_episode_length: per_episode(|e| e.length as f64),
             stage_mix: mix
                 .iter()
                 .zip(&self.stage_names)

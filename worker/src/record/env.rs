@@ -9,11 +9,14 @@ use crm::{EnvStep, Environment, Machine};
 use grasp_sim::GraspEnv;
 
 use super::{EpisodeStream, SharedRecorder, lock, scene};
+use crate::jobs::eval::EpisodeRecord;
 
 struct Episode {
     stream: EpisodeStream,
     step: i64,
     stage: crm::StageId,
+    /// What the job reports of the episode when it ends (its transitions, its return).
+    summary: EpisodeRecord,
 }
 
 /// A `GraspEnv` that records the episodes its recorder asks for.
@@ -43,9 +46,11 @@ impl Recorded {
         &mut self.inner
     }
 
-    fn finish(&mut self) {
+    /// Ends the recorded episode; `ended` when it ended (not cut short by a reset), so its
+    /// summary is kept.
+    fn finish(&mut self, ended: bool) {
         if let (Some(episode), Some(recorder)) = (self.episode.take(), &self.recorder) {
-            lock(recorder).end_episode(episode.stream);
+            lock(recorder).end_episode(episode.stream, ended.then_some(episode.summary));
         }
     }
 
@@ -74,6 +79,13 @@ impl Recorded {
             stream,
             step: 0,
             stage,
+            summary: EpisodeRecord {
+                task: self.inner.task().id.clone(),
+                success: false,
+                length: 0,
+                total_return: 0.0,
+                transitions: Vec::new(),
+            },
         });
     }
 
@@ -109,11 +121,23 @@ impl Recorded {
                 .and_then(|()| {
                     scene::log_stage(rec, to, outcome.next, outcome.next != outcome.from)
                 });
+            let summary = &mut episode.summary;
+            summary.length = episode.step as usize;
+            summary.total_return +=
+                f64::from(outcome.intra_reward) + f64::from(outcome.transition_reward);
             if let Some(event) = outcome.event {
                 let event = self.machine.event_name(event);
                 logged = logged.and_then(|()| {
                     scene::log_transition(rec, from, to, event, outcome.transition_reward)
                 });
+                summary.transitions.push((
+                    // 0-based, as the machine's history counts.
+                    summary.length - 1,
+                    from.to_string(),
+                    to.to_string(),
+                    event.to_string(),
+                    outcome.transition_reward,
+                ));
             }
             episode.stage = outcome.next;
             ended |= outcome.done;
@@ -121,21 +145,22 @@ impl Recorded {
         if ended {
             let stage = self.machine.stage_name(episode.stage);
             let done = !step.truncated || outcome.as_ref().is_ok_and(|o| o.done);
+            episode.summary.success = done && stage == "success";
             logged = logged.and_then(|()| scene::log_end(rec, stage, episode.step, !done));
         }
         if let Err(err) = logged {
             tracing::warn!(%err, "recording a step");
         }
         if ended {
-            self.finish();
+            self.finish(true);
         }
     }
 }
 
 impl Environment for Recorded {
     fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
-        // An episode cut short (a reset before its end) is kept as it is.
-        self.finish();
+        // An episode cut short (a reset before its end) is kept as it is, without a summary.
+        self.finish(false);
         let observation = self.inner.reset(seed)?;
         self.begin(seed);
         Ok(observation)

@@ -20,6 +20,8 @@ use crm_api::{Iteration, RecordSpec};
 use rerun::sink::MemorySinkStorage;
 use rerun::{RecordingStream, RecordingStreamBuilder};
 
+use crate::jobs::eval::EpisodeRecord;
+
 pub use env::Recorded;
 
 /// The application id every recording carries.
@@ -54,6 +56,9 @@ pub struct Recorder {
     training: Option<EpisodeStream>,
     pending: Vec<u8>,
     pending_episodes: u32,
+    /// The recorded episodes' summaries with their transitions, kept for a training job to
+    /// report (evaluations report every episode on their own); `None` keeps none.
+    summaries: Option<Vec<EpisodeRecord>>,
 }
 
 /// A recorder shared between an environment and its job.
@@ -104,7 +109,14 @@ impl Recorder {
             training: None,
             pending: Vec::new(),
             pending_episodes: 0,
+            summaries: None,
         }
+    }
+
+    /// Keeps a summary of each recorded episode that ends, for [`Recorder::take_summaries`].
+    pub fn keeping_summaries(mut self) -> Self {
+        self.summaries = Some(Vec::new());
+        self
     }
 
     pub fn shared(self) -> SharedRecorder {
@@ -158,12 +170,23 @@ impl Recorder {
     }
 
     /// Finishes a recorded episode: its bytes join the pending ones, or it is flushed to the
-    /// viewer.
-    pub fn end_episode(&mut self, stream: EpisodeStream) {
+    /// viewer. `summary` is the episode's, when it ended (not cut short by a reset).
+    pub fn end_episode(&mut self, stream: EpisodeStream, summary: Option<EpisodeRecord>) {
         match self.drain(&stream) {
             Ok(_) => self.pending_episodes += 1,
             Err(err) => tracing::warn!(err = %format!("{err:#}"), "an episode's recording is lost"),
         }
+        if let (Some(summaries), Some(summary)) = (&mut self.summaries, summary) {
+            summaries.push(summary);
+        }
+    }
+
+    /// The summaries of the recorded episodes that ended since the last call.
+    pub fn take_summaries(&mut self) -> Vec<EpisodeRecord> {
+        self.summaries
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
     }
 
     fn drain(&mut self, stream: &EpisodeStream) -> anyhow::Result<usize> {
@@ -230,7 +253,7 @@ mod tests {
         let picked: Vec<bool> = (0..10)
             .map(|_| match recorder.begin_episode("t") {
                 Some(stream) => {
-                    recorder.end_episode(stream);
+                    recorder.end_episode(stream, None);
                     true
                 }
                 None => false,

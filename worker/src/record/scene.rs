@@ -227,11 +227,15 @@ pub fn log_iteration(rec: &RecordingStream, it: &crm_api::Iteration) -> Recordin
     rec.set_time_sequence("steps", it.steps as i64);
     let scalar = |path: &str, v: f64| rec.log(path, &rerun::Scalars::single(v));
     scalar("training/success_rate", it.success_rate_last_100)?;
-    if it.episodes > 0 {
-        scalar("training/return/total", it.mean_return)?;
-        scalar("training/return/intra_stage", it.mean_intra_return)?;
-        scalar("training/return/transition", it.mean_transition_return)?;
-        scalar("training/episode_length", it.mean_episode_length)?;
+    for (path, value) in [
+        ("training/return/total", it.mean_return),
+        ("training/return/intra_stage", it.mean_intra_return),
+        ("training/return/transition", it.mean_transition_return),
+        ("training/episode_length", it.mean_episode_length),
+    ] {
+        if let Some(value) = value {
+            scalar(path, value)?;
+        }
     }
     for (stage, share) in &it.stage_mix {
         scalar(&format!("training/stage_mix/{stage}"), *share)?;

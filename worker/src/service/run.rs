@@ -16,7 +16,7 @@ use tokio::sync::mpsc;
 use super::{Client, WorkerOptions};
 use crate::commands::EnvArgs;
 use crate::jobs::demos;
-use crate::jobs::eval::evaluate;
+use crate::jobs::eval::{EpisodeRecord, evaluate};
 use crate::jobs::train::Trainer;
 use crate::record::{Recorder, SharedRecorder, lock};
 
@@ -158,7 +158,13 @@ fn train(
         None
     };
     let algorithm = spec.algorithm.name();
-    let recorder = recorder_for(spec.record.as_ref(), job.job_id);
+    // A training job reports the episodes it records with their transitions (the run page's
+    // episode list); evaluations report every episode themselves.
+    let recorder = spec.record.as_ref().filter(|r| r.enabled()).map(|r| {
+        Recorder::new(r, format!("job {}", job.job_id))
+            .keeping_summaries()
+            .shared()
+    });
     let mut trainer = Trainer::new(
         spec.clone(),
         &EnvArgs::default(),
@@ -270,24 +276,7 @@ fn eval(link: &Link, job: &pb::Job, dir: &Path) -> anyhow::Result<Option<serde_j
         recorder.clone(),
         |done, total, record| {
             ship(link, job.job_id, recorder.as_ref());
-            let episode = progress::Body::Episode(pb::EpisodeSummary {
-                task: record.task.clone(),
-                success: record.success,
-                length: record.length as u32,
-                episode_return: record.total_return as f32,
-                transitions: record
-                    .transitions
-                    .iter()
-                    .map(|(step, from, to, event, reward)| pb::Transition {
-                        step: *step as u32,
-                        from_stage: from.clone(),
-                        to_stage: to.clone(),
-                        event: event.clone(),
-                        reward: *reward,
-                    })
-                    .collect(),
-            });
-            let mut sent = link.send(episode);
+            let mut sent = link.send(summary(record));
             if sent.is_ok() && (done == total || last.elapsed() >= Duration::from_secs(1)) {
                 last = Instant::now();
                 sent = link.send(progress::Body::Eval(pb::EvalProgress {
@@ -314,19 +303,50 @@ fn eval(link: &Link, job: &pb::Job, dir: &Path) -> anyhow::Result<Option<serde_j
     Ok(Some(value))
 }
 
+/// An episode's summary as the coordinator stores it.
+fn summary(record: &EpisodeRecord) -> progress::Body {
+    progress::Body::Episode(pb::EpisodeSummary {
+        task: record.task.clone(),
+        success: record.success,
+        length: record.length as u32,
+        episode_return: record.total_return as f32,
+        transitions: record
+            .transitions
+            .iter()
+            .map(|(step, from, to, event, reward)| pb::Transition {
+                step: *step as u32,
+                from_stage: from.clone(),
+                to_stage: to.clone(),
+                event: event.clone(),
+                reward: *reward,
+            })
+            .collect(),
+    })
+}
+
 /// The job's recorder, when its spec asks for one.
 fn recorder_for(spec: Option<&crm_api::RecordSpec>, job: i64) -> Option<SharedRecorder> {
     spec.filter(|r| r.enabled())
         .map(|r| Recorder::new(r, format!("job {job}")).shared())
 }
 
-/// Sends what the recorder holds to the coordinator. A failed append loses those episodes'
+/// Sends what the recorder holds to the coordinator: the summaries of the episodes it kept
+/// (training jobs), then the recording. A failed append loses those episodes'
 /// recording, never the job.
 fn ship(link: &Link, job: i64, recorder: Option<&SharedRecorder>) {
     let Some(recorder) = recorder else {
         return;
     };
-    let Some((bytes, episodes)) = lock(recorder).take_pending() else {
+    let (pending, summaries) = {
+        let mut recorder = lock(recorder);
+        (recorder.take_pending(), recorder.take_summaries())
+    };
+    for record in &summaries {
+        if let Err(err) = link.send(summary(record)) {
+            tracing::warn!(job, err = %format!("{err:#}"), "an episode summary was not sent");
+        }
+    }
+    let Some((bytes, episodes)) = pending else {
         return;
     };
     match link

@@ -238,13 +238,15 @@ fn study(
         &study,
         &plots.join("success.png"),
         "success rate (last 100 episodes)",
+        Some((0.0, 1.0)),
         |it| it.success_rate_last_100,
     )?;
     plot::bands(
         &study,
         &plots.join("episode_length.png"),
         "mean episode length (control steps)",
-        |it| it.mean_episode_length,
+        Some((0.0, f64::INFINITY)),
+        |it| it.mean_episode_length.unwrap_or(f64::NAN),
     )?;
     let path = args.out.join("RESULTS.md");
     std::fs::write(&path, table::markdown(args, &study))

@@ -50,14 +50,31 @@ fn bands_of(study: &Study, value: &impl Fn(&Iteration) -> f64) -> Vec<Band> {
         .collect()
 }
 
-/// Draws every algorithm's band and mean line to `path`.
+/// A curve's point with its band: (steps, mean, band low, band high).
+type Clipped = (f64, f64, f64, f64);
+
+/// Each point's mean ± std, clipped to `range`.
+fn clipped(points: &[(f64, f64, f64)], range: Option<(f64, f64)>) -> Vec<Clipped> {
+    let clip = |y: f64| range.map_or(y, |(lo, hi)| y.clamp(lo, hi));
+    points
+        .iter()
+        .map(|&(x, mean, std)| (x, mean, clip(mean - std), clip(mean + std)))
+        .collect()
+}
+
+/// Draws every algorithm's band and mean line to `path`; `range` bounds what the value can
+/// be (a success rate's [0, 1]), and the bands are clipped to it.
 pub fn bands(
     study: &Study,
     path: &Path,
     title: &str,
+    range: Option<(f64, f64)>,
     value: impl Fn(&Iteration) -> f64,
 ) -> anyhow::Result<()> {
-    let curves = bands_of(study, &value);
+    let curves: Vec<(String, Vec<Clipped>)> = bands_of(study, &value)
+        .into_iter()
+        .map(|(algorithm, points)| (algorithm, clipped(&points, range)))
+        .collect();
     // Registering twice is harmless; plotters keeps the first.
     plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
         .map_err(|_| anyhow::anyhow!("the bundled font is not a font"))?;
@@ -70,12 +87,12 @@ pub fn bands(
             .fold(1.0, f64::max);
         let lo = curves
             .iter()
-            .flat_map(|(_, p)| p.iter().map(|p| p.1 - p.2))
+            .flat_map(|(_, p)| p.iter().map(|p| p.2))
             .fold(f64::INFINITY, f64::min)
             .min(0.0);
         let hi = curves
             .iter()
-            .flat_map(|(_, p)| p.iter().map(|p| p.1 + p.2))
+            .flat_map(|(_, p)| p.iter().map(|p| p.3))
             .fold(f64::NEG_INFINITY, f64::max)
             .max(lo + 1e-6);
         let hi = if hi <= 1.0 && lo >= 0.0 { 1.0 } else { hi };
@@ -94,8 +111,8 @@ pub fn bands(
             let color = Palette99::pick(k).to_rgba();
             let band: Vec<(f64, f64)> = points
                 .iter()
-                .map(|p| (p.0, p.1 + p.2))
-                .chain(points.iter().rev().map(|p| (p.0, p.1 - p.2)))
+                .map(|p| (p.0, p.3))
+                .chain(points.iter().rev().map(|p| (p.0, p.2)))
                 .collect();
             chart.draw_series(std::iter::once(Polygon::new(band, color.mix(0.2).filled())))?;
             chart
@@ -118,4 +135,19 @@ pub fn bands(
         Ok(())
     };
     draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bands_are_clipped_to_what_the_value_can_be() {
+        let points = [(0.0, 0.1, 0.3), (1.0, 0.9, 0.2)];
+        assert_eq!(
+            clipped(&points, Some((0.0, 1.0))),
+            [(0.0, 0.1, 0.0, 0.4), (1.0, 0.9, 0.7, 1.0)]
+        );
+        assert_eq!(clipped(&points, None)[0].2, 0.1 - 0.3);
+    }
 }
