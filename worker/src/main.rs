@@ -38,6 +38,8 @@ enum Command {
     Eval(commands::eval::EvalArgs),
     /// Replay one evaluation episode of a checkpoint into a rerun recording or a live viewer.
     Record(commands::record::RecordArgs),
+    /// Drive one seeded episode with a file of actions; print each step as a JSON line.
+    Replay(commands::replay::ReplayArgs),
     /// Train and evaluate every algorithm at one budget; write RESULTS.md and PNG curves.
     Results(commands::results::ResultsArgs),
     /// The grasp-topology selection network: train it or ask it.
@@ -62,6 +64,7 @@ fn main() -> std::process::ExitCode {
         Command::Train(args) => commands::train::run(args),
         Command::Eval(args) => commands::eval::run(args),
         Command::Record(args) => commands::record::run(args),
+        Command::Replay(args) => commands::replay::run(args),
         Command::Results(args) => commands::results::run(args),
         Command::Topology(command) => commands::topology::run(command),
         Command::Bench(command) => commands::bench::run(command),

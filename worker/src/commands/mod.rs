@@ -5,6 +5,7 @@ pub mod eval;
 pub mod oracle;
 pub mod record;
 pub mod remote;
+pub mod replay;
 pub mod results;
 pub mod service;
 pub mod tasks;
