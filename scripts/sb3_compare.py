@@ -159,6 +159,7 @@ def main():
     parser.add_argument("--window", type=int, default=1000)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", required=True)
+    parser.add_argument("--save", help="a folder for the final model and VecNormalize statistics")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     cfg = CONFIGS[args.config]
@@ -181,6 +182,9 @@ def main():
     with open(args.out, "w") as out:
         log = Log(out, args.minutes, args.window)
         model.learn(total_timesteps=total, callback=[log, StopOnFlag()])
+    if args.save:
+        model.save(f"{args.save}/ppo.zip")
+        env.save(f"{args.save}/vecnormalize.pkl")
     print(json.dumps({"config": args.config, "seed": args.seed, "steps": model.num_timesteps,
                       "minutes": (time.perf_counter() - log.start) / 60}))
 

@@ -273,6 +273,37 @@ mod tests {
     }
 
     #[test]
+    fn a_training_recorder_keeps_the_summaries_of_ended_episodes() {
+        let spec = RecordSpec {
+            every: 1,
+            max_episodes: 3,
+            connect: None,
+        };
+        let summary = |task: &str| EpisodeRecord {
+            task: task.into(),
+            success: true,
+            length: 12,
+            total_return: 3.5,
+            transitions: vec![(4, "approach".into(), "grasp".into(), "arrive".into(), 50.0)],
+        };
+        let mut training = Recorder::new(&spec, "job 3").keeping_summaries();
+        let mut evaluation = Recorder::new(&spec, "job 4");
+        for recorder in [&mut training, &mut evaluation] {
+            let stream = recorder.begin_episode("t").expect("recorded");
+            recorder.end_episode(stream, Some(summary("a")));
+            // Cut short by a reset: no summary.
+            let stream = recorder.begin_episode("t").expect("recorded");
+            recorder.end_episode(stream, None);
+        }
+        let kept = training.take_summaries();
+        assert_eq!(kept.len(), 1);
+        assert_eq!((kept[0].task.as_str(), kept[0].transitions.len()), ("a", 1));
+        assert!(training.take_summaries().is_empty(), "taken once");
+        assert!(evaluation.take_summaries().is_empty());
+        assert_eq!(training.take_pending().expect("bytes").1, 2);
+    }
+
+    #[test]
     fn an_unreachable_viewer_turns_recording_off() {
         // A port nothing listens on: bind one, then free it.
         let port = std::net::TcpListener::bind("127.0.0.1:0")

@@ -160,11 +160,7 @@ fn train(
     let algorithm = spec.algorithm.name();
     // A training job reports the episodes it records with their transitions (the run page's
     // episode list); evaluations report every episode themselves.
-    let recorder = spec.record.as_ref().filter(|r| r.enabled()).map(|r| {
-        Recorder::new(r, format!("job {}", job.job_id))
-            .keeping_summaries()
-            .shared()
-    });
+    let recorder = recorder_for(spec.record.as_ref(), job.job_id, true);
     let mut trainer = Trainer::new(
         spec.clone(),
         &EnvArgs::default(),
@@ -268,7 +264,7 @@ fn eval(link: &Link, job: &pb::Job, dir: &Path) -> anyhow::Result<Option<serde_j
         .context("downloading the checkpoint")?;
     let mut last = Instant::now();
     let mut send_failed = None;
-    let recorder = recorder_for(spec.record.as_ref(), job.job_id);
+    let recorder = recorder_for(spec.record.as_ref(), job.job_id, false);
     let report = evaluate(
         &path,
         &spec,
@@ -324,10 +320,21 @@ fn summary(record: &EpisodeRecord) -> progress::Body {
     })
 }
 
-/// The job's recorder, when its spec asks for one.
-fn recorder_for(spec: Option<&crm_api::RecordSpec>, job: i64) -> Option<SharedRecorder> {
-    spec.filter(|r| r.enabled())
-        .map(|r| Recorder::new(r, format!("job {job}")).shared())
+/// The job's recorder, when its spec asks for one; with `summaries` it keeps the recorded
+/// episodes' summaries for [`ship`] to report.
+fn recorder_for(
+    spec: Option<&crm_api::RecordSpec>,
+    job: i64,
+    summaries: bool,
+) -> Option<SharedRecorder> {
+    spec.filter(|r| r.enabled()).map(|r| {
+        let recorder = Recorder::new(r, format!("job {job}"));
+        if summaries {
+            recorder.keeping_summaries().shared()
+        } else {
+            recorder.shared()
+        }
+    })
 }
 
 /// Sends what the recorder holds to the coordinator: the summaries of the episodes it kept
