@@ -228,7 +228,7 @@ class CrmGraspVectorEnv(VectorEnv):
         event = np.empty(n, dtype=object)
         events = np.empty(n, dtype=object)
         outcome = np.full(n, None, dtype=object)
-        final_stage = stage.copy()
+        final_stage = np.empty(n, dtype=np.int64)
         final_task = np.empty(n, dtype=object)
         for i, (st, r_in, r_tr, ev, evs, term, trunc, out, tk, start) in enumerate(steps):
             intra[i], transition[i], terminated[i], truncated[i] = r_in, r_tr, term, trunc
@@ -264,7 +264,6 @@ class CrmGraspVectorEnv(VectorEnv):
                 },
                 ended,
             )
-            final[~ended] = 0.0
             infos.update(
                 final_obs=final, _final_obs=ended, final_info=final_info, _final_info=ended
             )

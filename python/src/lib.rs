@@ -155,7 +155,8 @@ impl NativeBatch {
     /// Steps every environment with its row of `actions` (float32, `len x 8`, finite), the
     /// GIL released; writes the observations into `obs` (`len x 38`; the next episode's first
     /// one where a step ended an episode and `autoreset` is on) and, where an episode ended,
-    /// its last observation into `final_obs`. A refused action changes nothing.
+    /// its last observation into `final_obs` (zeros elsewhere). A refused action changes
+    /// nothing.
     fn step(
         &self,
         py: Python<'_>,
@@ -184,16 +185,14 @@ impl NativeBatch {
         let mut last = vec![0.0f32; steps.len() * width];
         for (k, step) in steps.iter().enumerate() {
             let row = k * width..(k + 1) * width;
-            match &step.reset {
-                Some(start) => {
-                    next[row.clone()].copy_from_slice(&start.observation);
-                    last[row].copy_from_slice(&step.observation);
-                }
-                None if step.terminated || step.truncated => {
-                    next[row.clone()].copy_from_slice(&step.observation);
-                    last[row].copy_from_slice(&step.observation);
-                }
-                None => next[row].copy_from_slice(&step.observation),
+            let start = step
+                .reset
+                .as_ref()
+                .map_or(&step.observation, |s| &s.observation);
+            next[row.clone()].copy_from_slice(start);
+            // Rows of episodes still running stay zero.
+            if step.terminated || step.truncated {
+                last[row].copy_from_slice(&step.observation);
             }
         }
         fill(py, obs, &next, "obs")?;
