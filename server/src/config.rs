@@ -53,6 +53,10 @@ pub struct ServerConfig {
     /// Most training jobs one sweep may create.
     #[arg(long, default_value_t = 200)]
     pub max_sweep_jobs: usize,
+    /// A folder of world folders (each with a `world.json`) that jobs may name besides the
+    /// built-in world; workers need the same folders (`crm worker --worlds`).
+    #[arg(long, value_name = "DIR")]
+    pub worlds: Option<PathBuf>,
 }
 
 impl Default for ServerConfig {
@@ -72,6 +76,7 @@ impl Default for ServerConfig {
             keep_checkpoints: 3,
             models: PathBuf::from("models"),
             max_sweep_jobs: 200,
+            worlds: None,
         }
     }
 }

@@ -26,6 +26,8 @@ pub use store::Store;
 pub struct AppState {
     pub store: Store,
     pub catalog: Arc<Catalog>,
+    /// The worlds jobs may name: the built-in one first, then those of `--worlds`.
+    pub worlds: Arc<Vec<crm_api::worlds::WorldEntry>>,
     pub config: ServerConfig,
     /// A counter bumped when a job is queued, changes state or reports progress; live pages
     /// follow it through `GET /api/v1/events`. [`SHUTDOWN`] ends their streams.
@@ -87,9 +89,12 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
         .await
         .with_context(|| format!("opening the store in {}", config.data_dir.display()))?;
     let catalog = Arc::new(Catalog::builtin()?);
+    let worlds =
+        Arc::new(crm_api::worlds::discover(config.worlds.as_deref()).context("reading --worlds")?);
     let state = Arc::new(AppState {
         store,
         catalog,
+        worlds,
         config: config.clone(),
         events: tokio::sync::watch::channel(0).0,
     });

@@ -48,6 +48,9 @@ enum Command {
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
+    /// Worlds as folders: check one.
+    #[command(subcommand)]
+    World(commands::world::WorldCommand),
 }
 
 fn main() -> std::process::ExitCode {
@@ -68,6 +71,7 @@ fn main() -> std::process::ExitCode {
         Command::Results(args) => commands::results::run(args),
         Command::Topology(command) => commands::topology::run(command),
         Command::Bench(command) => commands::bench::run(command),
+        Command::World(command) => commands::world::run(command),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

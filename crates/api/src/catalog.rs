@@ -1,4 +1,4 @@
-//! The benchmark's catalog, read from `crates/sim/data/benchmark.json` at build time: task
+//! The benchmark's catalog, read from `worlds/crm/benchmark.json` at build time: task
 //! ids with their object, objective and assigned topology, and the objects' names. Lets the
 //! coordinator validate jobs and show tasks without linking the simulator.
 
@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 
 use serde::{Deserialize, Serialize};
 
-const BENCHMARK: &str = include_str!("../../sim/data/benchmark.json");
+const BENCHMARK: &str = include_str!("../../../worlds/crm/benchmark.json");
 
 /// One task as the catalog knows it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -84,6 +84,9 @@ pub fn task_list(task: &Option<String>, tasks: &[String]) -> Vec<String> {
 #[serde(deny_unknown_fields)]
 pub struct TrainSpec {
     pub algorithm: Algorithm,
+    /// The world to train in, by name (`GET /api/v1/worlds`); absent: the built-in `crm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world: Option<String>,
     /// Environment steps to train for in total.
     pub steps: u64,
     #[serde(default)]
@@ -156,6 +159,10 @@ fn is_default_sac(config: &SacConfig) -> bool {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EvalSpec {
+    /// The world to evaluate in, by name; absent: the built-in `crm`. The checkpoint must
+    /// come from a world with the same hand profile, spec and sensors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world: Option<String>,
     /// Episodes, each on a task drawn with the seed. Paper: 1,000.
     #[serde(default = "default_episodes")]
     pub episodes: u64,
@@ -197,6 +204,7 @@ fn default_episodes() -> u64 {
 impl Default for EvalSpec {
     fn default() -> Self {
         Self {
+            world: None,
             episodes: default_episodes(),
             seed: 0,
             task: None,

@@ -10,6 +10,7 @@ pub mod config;
 pub mod imitation;
 pub mod jobs;
 pub mod record;
+pub mod worlds;
 
 pub use catalog::Catalog;
 pub use checkpoint::{CheckpointError, CheckpointInfo};

@@ -42,6 +42,13 @@ pub struct CheckpointHeader {
     /// checkpoints (`tanh`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub activation: Option<String>,
+    /// The world it was trained in (`grasp_sim::World::name`); absent: the built-in world.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world: Option<String>,
+    /// The hash of what shapes that world's observation and action (hand profile, spec,
+    /// sensors: `grasp_sim::World::hash`); absent: the built-in world's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world_hash: Option<String>,
 }
 
 /// What CRM-SAC checkpoints say in `activation` (older ones, with `tanh`, say nothing).
@@ -310,6 +317,8 @@ mod tests {
             hidden: net.hidden().to_vec(),
             config: serde_json::json!({"learning_rate": 3e-5}),
             activation: None,
+            world: None,
+            world_hash: None,
         }
     }
 
@@ -422,6 +431,8 @@ mod tests {
             hidden: vec![16, 16],
             config: serde_json::json!({}),
             activation: None,
+            world: None,
+            world_hash: None,
         };
         let path = temp("sac.safetensors");
         Checkpoint::save_sac(&nets, &header, &path).expect("save");

@@ -21,6 +21,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod assets;
 pub mod benchmark;
 pub mod config;
 pub mod contacts;
@@ -36,11 +37,13 @@ pub mod script;
 pub mod spec;
 pub mod stiction;
 pub mod view;
+pub mod world;
 
 pub use benchmark::Benchmark;
 pub use config::{FingerActions, Protocol, Randomization, SimConfig};
 pub use env::{GraspEnv, TaskChoice};
 pub use error::{Error, Result};
+pub use world::World;
 
 /// Version of the environment's dynamics and observation layout; checkpoints record it.
 /// `v2`: the paper's ready test and scripted objective execution, and policies that carry

@@ -78,7 +78,7 @@ impl Oracle {
         self.phase_steps += 1;
         let task = env.task();
         let object = env.benchmark().object_of(task);
-        let shape = env.topology().shape();
+        let shape = env.hand_shape();
         let limit = object.fragility.grasp_force_limit();
         let grip = parts.grip * limit;
         let wanted_grip = crate::script::wanted_grip(env);

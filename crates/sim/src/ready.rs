@@ -16,7 +16,7 @@
 
 use rapier3d::prelude::RigidBodyHandle;
 
-use crate::benchmark::{Object, Topology};
+use crate::benchmark::{FingerShape, Object, Topology};
 use crate::contacts::ContactMetrics;
 use crate::hand::Hand;
 
@@ -44,6 +44,8 @@ pub struct Touch {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReadyTest {
     pub topology: Topology,
+    /// The topology's fingers on this hand (thumb first).
+    pub active: [bool; 5],
     /// Smallest summed normal force (N) that carries the object.
     pub need: f32,
     /// The object's fragility limit (N): a grip at or above it is not ready.
@@ -64,7 +66,12 @@ pub fn carrying_grip(object: &Object) -> f32 {
 
 impl ReadyTest {
     /// The test for `object` grasped with `topology`.
-    pub fn for_object(topology: Topology, object: &Object, part_force: f32) -> Self {
+    pub fn for_object(
+        topology: Topology,
+        shape: &[FingerShape; 5],
+        object: &Object,
+        part_force: f32,
+    ) -> Self {
         let need = if object.anchor.is_some() {
             ANCHORED_GRIP
         } else {
@@ -72,6 +79,7 @@ impl ReadyTest {
         };
         Self {
             topology,
+            active: std::array::from_fn(|f| shape[f].active),
             need,
             limit: object.fragility.grasp_force_limit(),
             part_force,
@@ -86,8 +94,7 @@ impl ReadyTest {
         if touch.grip < self.need || touch.grip >= self.limit {
             return false;
         }
-        let shape = self.topology.shape();
-        let finger = |f: usize| shape[f].active && touch.fingers[f] >= self.part_force;
+        let finger = |f: usize| self.active[f] && touch.fingers[f] >= self.part_force;
         let opposed = finger(0) && (1..5).any(finger);
         let parts = match self.topology {
             Topology::PPdAb23 | Topology::PPdAb25 | Topology::PoPmAb25 => 3,
@@ -107,7 +114,7 @@ pub fn touch(contacts: &ContactMetrics, hand: &Hand, part_force: f32) -> Touch {
         };
         if let Some((finger, _)) = hand.link_of(body) {
             fingers[finger] += point.normal_force;
-        } else if body != hand.palm {
+        } else if !hand.is_palm(body) {
             continue;
         }
         match bodies.iter_mut().find(|(b, _)| *b == body) {
@@ -134,7 +141,8 @@ mod tests {
             .iter()
             .find(|o| o.name == object)
             .expect("object");
-        ReadyTest::for_object(topology, object, 0.3)
+        let shape = crate::hand::builtin::model().shape(topology);
+        ReadyTest::for_object(topology, &shape, object, 0.3)
     }
 
     /// A touch by the listed fingers (thumb first), one link each, sharing `grip`.

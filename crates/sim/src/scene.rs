@@ -1,12 +1,14 @@
 //! Building the world for one task and seed: table, object (randomized pose), hand.
 
+use std::sync::Arc;
+
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rapier3d::prelude::*;
 
 use crate::benchmark::{Axis, Object, Shape, Task};
 use crate::config::SimConfig;
-use crate::hand::{GRASP_POINT, HAND_GROUP, Hand, OBJECT_GROUP, TABLE_GROUP};
+use crate::hand::{HAND_GROUP, Hand, HandModel, OBJECT_GROUP, TABLE_GROUP};
 use crate::stiction::Stiction;
 
 /// Half extents of the table top; its surface is the plane z = 0.
@@ -58,6 +60,11 @@ pub fn part_collider(shape: &Shape) -> ColliderBuilder {
             Axis::Z => ColliderBuilder::capsule_z(half_height, radius),
         },
         Shape::Ball { radius } => ColliderBuilder::ball(radius),
+        Shape::Mesh { ref geometry, .. } => match &geometry.shape {
+            Some(shape) => ColliderBuilder::new(shape.clone()),
+            // A mesh part is read when its benchmark loads; an unread one has no volume.
+            None => ColliderBuilder::ball(1e-3),
+        },
     }
 }
 
@@ -86,7 +93,13 @@ pub fn integration_parameters(config: &SimConfig) -> IntegrationParameters {
 }
 
 /// Builds the world of `task` for one episode; all randomness comes from `rng`.
-pub fn build(task: &Task, object: &Object, config: &SimConfig, rng: &mut ChaCha8Rng) -> Scene {
+pub fn build(
+    hand: &Arc<HandModel>,
+    task: &Task,
+    object: &Object,
+    config: &SimConfig,
+    rng: &mut ChaCha8Rng,
+) -> Scene {
     let mut world = PhysicsWorld::new();
     world.gravity = Vec3::new(0.0, 0.0, -9.81);
     world.integration_parameters = integration_parameters(config);
@@ -147,15 +160,17 @@ pub fn build(task: &Task, object: &Object, config: &SimConfig, rng: &mut ChaCha8
         world.insert_impulse_joint(ground, handle, joint);
     }
 
-    let hand_rotation = Rotation::from_rotation_z(dyaw + task.grasp.yaw);
+    let hand_rotation = Rotation::from_rotation_z(dyaw + task.grasp.yaw) * hand.base_rotation;
     let grasp_location = object_start.transform_point(Vec3::from(task.grasp.offset));
-    let grasp_point = hand_rotation * Vec3::from(GRASP_POINT);
+    let grasp_point = hand_rotation * hand.grasp_point;
     let mount_start = grasp_location + Vec3::from(config.hand_start) - grasp_point;
-    let shape = task.topology.shape();
-    let joint_offsets = (0..5)
+    let joint_offsets = hand
+        .fingers
+        .iter()
         .map(|finger| {
-            let joints = if finger == 0 { 2 } else { 3 };
-            (0..joints)
+            finger
+                .coupled
+                .iter()
                 .map(|_| {
                     if noise.enabled {
                         symmetric(rng, noise.joint)
@@ -168,8 +183,9 @@ pub fn build(task: &Task, object: &Object, config: &SimConfig, rng: &mut ChaCha8
         .collect();
     let hand = Hand::build(
         &mut world,
+        hand,
         Pose::from_parts(mount_start, hand_rotation),
-        &shape,
+        task.topology,
         joint_offsets,
         Stiction::hooks(&config.stiction),
     );

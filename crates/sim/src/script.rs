@@ -37,7 +37,7 @@ pub fn objective_action(env: &GraspEnv, hold: f32) -> Vec<f32> {
     let mut action = vec![0.0; ACTIONS.len()];
     let parts = env.observation_parts();
     let task = env.task();
-    let shape = env.topology().shape();
+    let shape = env.hand_shape();
     let limit = env
         .benchmark()
         .object_of(task)

@@ -26,7 +26,13 @@ pub enum PartShape {
         half_height: f32,
         radius: f32,
     },
-    /// A shape the view does not draw (none in the benchmark today).
+    /// Convex pieces (a mesh object's hulls, a description's convex mesh links) as one
+    /// triangle mesh in the collider's frame.
+    Mesh {
+        vertices: Vec<[f32; 3]>,
+        triangles: Vec<[u32; 3]>,
+    },
+    /// A shape the view does not draw.
     Other,
 }
 
@@ -66,7 +72,35 @@ fn shape_of(shape: &dyn rapier3d::parry::shape::Shape) -> PartShape {
             radius: c.radius,
         }
     } else {
-        PartShape::Other
+        let mut vertices: Vec<[f32; 3]> = Vec::new();
+        let mut triangles: Vec<[u32; 3]> = Vec::new();
+        let mut add = |pose: rapier3d::math::Pose, piece: &dyn rapier3d::parry::shape::Shape| {
+            if let Some(hull) = piece.as_convex_polyhedron() {
+                let (points, faces) = hull.to_trimesh();
+                let first = vertices.len() as u32;
+                vertices.extend(
+                    points
+                        .into_iter()
+                        .map(|p| pose.transform_point(p).to_array()),
+                );
+                triangles.extend(faces.into_iter().map(|f| f.map(|i| i + first)));
+            }
+        };
+        if let Some(compound) = shape.as_compound() {
+            for (pose, piece) in compound.shapes() {
+                add(*pose, piece.as_ref());
+            }
+        } else {
+            add(rapier3d::math::Pose::IDENTITY, shape);
+        }
+        if triangles.is_empty() {
+            PartShape::Other
+        } else {
+            PartShape::Mesh {
+                vertices,
+                triangles,
+            }
+        }
     }
 }
 
@@ -87,10 +121,11 @@ impl GraspEnv {
                     format!("object/part_{}", object_parts - 1)
                 }
                 Some(body) if body == hand.palm => "hand/palm".to_string(),
-                Some(body) => hand.link_of(body).map_or_else(
-                    || "other".to_string(),
-                    |(f, k)| format!("hand/{}/link_{k}", FINGERS[f]),
-                ),
+                Some(body) => match (hand.link_of(body), hand.link_name(body)) {
+                    (Some((f, k)), _) => format!("hand/{}/link_{k}", FINGERS[f]),
+                    (None, Some(name)) => format!("hand/{name}"),
+                    (None, None) => "other".to_string(),
+                },
             };
             let pose = collider.position();
             parts.push(Part {

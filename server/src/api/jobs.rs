@@ -73,7 +73,8 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
         Some(Value::String(kind)) => kind,
         Some(_) => return Err(ApiError::invalid("kind", "must be \"train\" or \"eval\"")),
     };
-    let catalog = &state.catalog;
+    let world = world_of(state, fields.get("world"))?;
+    let catalog = &world.catalog;
     let check_task = |task: &Option<String>, tasks: &[String], topology: &Option<String>| {
         check_task(catalog, task, tasks, topology)
     };
@@ -135,6 +136,33 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
             format!("{other:?}: must be \"train\" or \"eval\""),
         )),
     }
+}
+
+/// The world a submission names (`world`; absent: the built-in one), or a 400 naming it.
+pub(super) fn world_of<'a>(
+    state: &'a AppState,
+    value: Option<&Value>,
+) -> Result<&'a crm_api::worlds::WorldEntry, ApiError> {
+    let name = match value {
+        None | Some(Value::Null) => crm_api::worlds::BUILTIN,
+        Some(Value::String(name)) => name.as_str(),
+        Some(_) => {
+            return Err(ApiError::invalid(
+                "world",
+                "must be a world's name (a string)",
+            ));
+        }
+    };
+    state.worlds.iter().find(|w| w.name == name).ok_or_else(|| {
+        let known: Vec<&str> = state.worlds.iter().map(|w| w.name.as_str()).collect();
+        ApiError::invalid(
+            "world",
+            format!(
+                "unknown world {name:?}; this coordinator has {}",
+                known.join(", ")
+            ),
+        )
+    })
 }
 
 /// Checks task ids and a topology name against the catalog, naming the field.

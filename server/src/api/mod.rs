@@ -61,6 +61,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/checkpoints/{id}/download", get(checkpoints::download))
         .route("/workers", get(resources::workers))
         .route("/tasks", get(resources::tasks))
+        .route("/worlds", get(resources::worlds))
         .route("/charts", get(curves::chart))
         .route("/compare", get(compare::compare))
         .route("/topology", get(compare::topology))

@@ -227,3 +227,9 @@ pub async fn workers(State(state): State<Arc<AppState>>) -> Res {
 pub async fn tasks(State(state): State<Arc<AppState>>) -> Res {
     Ok(Json(&*state.catalog).into_response())
 }
+
+/// The worlds jobs may name: the built-in one and those under `--worlds`.
+pub async fn worlds(State(state): State<Arc<AppState>>) -> Res {
+    let worlds: Vec<_> = state.worlds.iter().map(|w| w.summary()).collect();
+    Ok(Json(json!({ "worlds": worlds })).into_response())
+}

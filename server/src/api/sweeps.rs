@@ -125,10 +125,12 @@ async fn plan(state: &AppState, body: Value) -> Result<Plan, ApiError> {
                     "leave kind and checkpoint_id out: the sweep's final checkpoints are evaluated",
                 ));
             }
-            let spec = eval_spec(&state.catalog, Value::Object(eval)).map_err(|e| ApiError {
+            let in_eval = |e: ApiError| ApiError {
                 field: Some(format!("eval.{}", e.field.clone().unwrap_or_default())),
                 ..e
-            })?;
+            };
+            let world = super::jobs::world_of(state, eval.get("world")).map_err(in_eval)?;
+            let spec = eval_spec(&world.catalog, Value::Object(eval)).map_err(in_eval)?;
             Some(spec)
         }
         Some(_) => {

@@ -47,7 +47,13 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
+    // The world by name, for a coordinator's workers (`--coordinator`).
+    let world = match &args.env.world {
+        Some(_) => Some(args.env.world()?.name.clone()),
+        None => None,
+    };
     let spec = EvalSpec {
+        world,
         episodes: args.episodes,
         seed: args.seed,
         task: None,

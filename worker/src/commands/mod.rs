@@ -11,20 +11,25 @@ pub mod service;
 pub mod tasks;
 pub mod topology;
 pub mod train;
+pub mod world;
 
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use std::io::Write;
 
 use anyhow::Context;
 use crm_api::ObjectiveMode;
-use grasp_sim::{Benchmark, SimConfig};
+use grasp_sim::{Benchmark, SimConfig, World};
 
 /// Options every environment-running command shares.
 #[derive(clap::Args, Clone, Debug, Default)]
 pub struct EnvArgs {
-    /// A benchmark file to use instead of the built-in one.
+    /// A world folder (`world.json`: hand, objects, tasks, spec, sensors) to run instead of
+    /// the built-in world; its files are found in the folder or in `CRM_ASSETS`.
+    #[arg(long, value_name = "DIR", conflicts_with = "benchmark")]
+    pub world: Option<PathBuf>,
+    /// A benchmark file to use instead of the built-in one (with the built-in hand).
     #[arg(long, value_name = "FILE")]
     pub benchmark: Option<PathBuf>,
     /// A CRM spec file to use instead of the built-in grasping spec.
@@ -47,6 +52,9 @@ pub struct EnvArgs {
     /// paper's test.
     #[arg(long, value_name = "SECONDS", value_parser = parse_hold_s)]
     pub hold_s: Option<f32>,
+    /// The world, read once.
+    #[arg(skip)]
+    loaded: Arc<OnceLock<World>>,
 }
 
 /// `--hold-s`: seconds within [`crm_api::jobs::HOLD_S_RANGE`].
@@ -75,16 +83,42 @@ pub fn protocol(mode: ObjectiveMode) -> grasp_sim::Protocol {
 }
 
 impl EnvArgs {
-    pub fn benchmark(&self) -> anyhow::Result<Arc<Benchmark>> {
-        Ok(Arc::new(match &self.benchmark {
-            Some(path) => Benchmark::load(path).context("loading the benchmark")?,
-            None => Benchmark::builtin(),
-        }))
+    /// The same options running the world in `dir` (a job's `world`).
+    pub fn in_world(&self, dir: Option<PathBuf>) -> Self {
+        Self {
+            world: dir,
+            loaded: Arc::default(),
+            ..self.clone()
+        }
     }
 
-    /// The machine from `--spec`, or the built-in grasping machine.
+    /// The world of `--world`, or the built-in one (with `--benchmark`'s objects and tasks).
+    pub fn world(&self) -> anyhow::Result<&World> {
+        if let Some(world) = self.loaded.get() {
+            return Ok(world);
+        }
+        let world = match (&self.world, &self.benchmark) {
+            (Some(dir), _) => {
+                World::load(dir).with_context(|| format!("loading the world {}", dir.display()))?
+            }
+            (None, Some(path)) => {
+                let mut world = World::builtin();
+                world.benchmark = Arc::new(Benchmark::load(path).context("loading the benchmark")?);
+                world
+            }
+            (None, None) => World::builtin(),
+        };
+        Ok(self.loaded.get_or_init(|| world))
+    }
+
+    pub fn benchmark(&self) -> anyhow::Result<Arc<Benchmark>> {
+        Ok(self.world()?.benchmark.clone())
+    }
+
+    /// The machine from `--spec`, the world's spec, or the built-in grasping machine.
     pub fn machine(&self) -> anyhow::Result<crm::Machine> {
-        self.machine_or(grasp_sim::spec::grasping_spec())
+        let spec = self.world()?.spec.clone();
+        self.machine_or(spec.unwrap_or_else(grasp_sim::spec::grasping_spec))
     }
 
     /// The machine from `--spec`, or `default`.
@@ -110,7 +144,16 @@ impl EnvArgs {
         let mut config = if self.no_randomization {
             SimConfig::deterministic()
         } else {
-            SimConfig::default()
+            let mut config = SimConfig::default();
+            // An unreadable world is reported by `benchmark()`, which every command calls.
+            if let Ok(World {
+                randomization: Some(randomization),
+                ..
+            }) = self.world()
+            {
+                config.randomization = randomization.clone();
+            }
+            config
         };
         config.protocol = protocol(objective);
         if let Some(hold) = hold_s {

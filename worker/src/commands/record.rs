@@ -67,6 +67,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         bail!("--connect: the viewer stopped answering");
     }
     let spec = EvalSpec {
+        world: None,
         episodes: 1,
         seed: args.seed,
         task: args.task.clone(),

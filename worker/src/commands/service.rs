@@ -77,6 +77,9 @@ pub struct ServePolicyArgs {
     /// Address to serve the Policy gRPC on.
     #[arg(long, default_value = "127.0.0.1:50052")]
     pub listen: String,
+    /// The world folder the checkpoint was trained in (default: the built-in world).
+    #[arg(long, value_name = "DIR")]
+    pub world: Option<PathBuf>,
 }
 
 pub fn up(args: UpArgs) -> anyhow::Result<()> {
@@ -100,5 +103,6 @@ pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
 }
 
 pub fn serve_policy(args: ServePolicyArgs) -> anyhow::Result<()> {
-    policy::serve_main(&args.checkpoint, &args.listen)
+    let env = crate::commands::EnvArgs::default().in_world(args.world);
+    policy::serve_main(&args.checkpoint, &args.listen, &env)
 }

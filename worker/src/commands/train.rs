@@ -94,6 +94,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     };
     let spec = TrainSpec {
         algorithm: args.algo,
+        world: None,
         steps: args.steps as u64,
         seed: args.seed,
         task: None,

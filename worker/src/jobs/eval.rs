@@ -30,7 +30,9 @@ pub struct LoadedPolicy {
 impl LoadedPolicy {
     /// Loads `path` for the machine its algorithm trains in (the flat one for `ppo`).
     pub fn load(path: &Path, env: &EnvArgs) -> anyhow::Result<Self> {
-        let algorithm = Checkpoint::read_header(path)?.algorithm;
+        let header = Checkpoint::read_header(path)?;
+        super::check_world(&header, env.world()?, path)?;
+        let algorithm = header.algorithm;
         let machine = if algorithm == "ppo" {
             env.machine_or(grasp_sim::spec::flat_spec())?
         } else {

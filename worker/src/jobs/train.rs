@@ -40,6 +40,8 @@ pub struct Trainer {
     last_100: EarlyStop,
     layout: Layout,
     spec_hash: String,
+    /// The world's name and hash, written into checkpoints.
+    world: (String, String),
     stage_names: Vec<String>,
     started: Instant,
     start_steps: u64,
@@ -93,6 +95,7 @@ impl Trainer {
                     spec.algorithm.name()
                 );
             }
+            super::check_world(&header, env.world()?, path)?;
             start_steps = header.steps;
             if is_sac {
                 resume_sac =
@@ -164,6 +167,7 @@ impl Trainer {
             learner,
             layout,
             spec_hash,
+            world: (env.world()?.name.clone(), env.world()?.hash.clone()),
             stage_names,
             started: Instant::now(),
             start_steps,
@@ -329,6 +333,8 @@ impl Trainer {
             },
             // `Checkpoint::save_sac` writes CRM-SAC's.
             activation: None,
+            world: Some(self.world.0.clone()),
+            world_hash: Some(self.world.1.clone()),
         };
         // Write beside and rename, so a reader never sees half a checkpoint.
         let partial = path.with_extension("safetensors.partial");

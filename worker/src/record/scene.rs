@@ -90,6 +90,15 @@ pub fn log_shapes(rec: &RecordingStream, parts: &[Part]) -> RecordingStreamResul
                     .with_colors([c])
                     .with_fill_mode(rerun::FillMode::Solid),
             )?,
+            PartShape::Mesh {
+                ref vertices,
+                ref triangles,
+            } => rec.log_static(
+                path,
+                &rerun::Mesh3D::new(vertices.iter().copied())
+                    .with_triangle_indices(triangles.iter().copied())
+                    .with_albedo_factor(c.0),
+            )?,
             PartShape::Other => {}
         }
     }

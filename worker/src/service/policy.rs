@@ -20,8 +20,10 @@ pub struct PolicyService {
 }
 
 impl PolicyService {
-    pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let policy = LoadedPolicy::load(path, &EnvArgs::default())?;
+    /// Loads `path` for the world of `env` (its hand, spec and sensors must be the ones the
+    /// checkpoint was trained with).
+    pub fn load(path: &Path, env: &EnvArgs) -> anyhow::Result<Self> {
+        let policy = LoadedPolicy::load(path, env)?;
         let machine = &policy.machine;
         let info = pb::PolicyInfo {
             algorithm: policy.algorithm.clone(),
@@ -122,9 +124,9 @@ impl Policy for PolicyService {
 }
 
 /// `crm serve-policy`'s entry: serves until ctrl-c.
-pub fn serve_main(checkpoint: &Path, listen: &str) -> anyhow::Result<()> {
+pub fn serve_main(checkpoint: &Path, listen: &str, env: &EnvArgs) -> anyhow::Result<()> {
     crm_server::init_logging();
-    let service = PolicyService::load(checkpoint)?;
+    let service = PolicyService::load(checkpoint, env)?;
     let addr: std::net::SocketAddr = listen
         .parse()
         .map_err(|e| anyhow::anyhow!("--listen: {listen:?} is not an address ({e})"))?;

@@ -1,12 +1,14 @@
 //! The benchmark as data: 20 objects, 7 objectives, 6 topologies and 26 tasks, loaded from a
-//! JSON file (`crates/sim/data/benchmark.json` is built in) and validated.
+//! JSON file (`worlds/crm/benchmark.json` is built in) and validated.
 
+pub mod mesh;
 mod object;
 mod task;
 mod taxonomy;
 
 use std::collections::BTreeSet;
 use std::path::Path;
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
@@ -14,9 +16,11 @@ pub use object::{Anchor, Axis, OBJECT_FEATURES, Object, ObjectFlags, Part, Shape
 pub use task::{GraspLocation, Task};
 pub use taxonomy::{FINGERS, FingerShape, Fragility, Objective, Topology};
 
+use crate::assets::Assets;
 use crate::error::{Error, Result, parse_json};
+use crate::hand::HandModel;
 
-const BUILTIN: &str = include_str!("../../data/benchmark.json");
+const BUILTIN: &str = include_str!("../../../../worlds/crm/benchmark.json");
 
 /// The whole benchmark.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -24,32 +28,126 @@ const BUILTIN: &str = include_str!("../../data/benchmark.json");
 pub struct Benchmark {
     pub objects: Vec<Object>,
     pub tasks: Vec<Task>,
+    /// The hand the tasks are grasped with: the built-in one unless a world names another.
+    #[serde(skip)]
+    pub hand: SharedHand,
+    /// Observation features the world's robot cannot measure (indices, read as zero).
+    #[serde(skip)]
+    pub sensors_without: Vec<usize>,
+}
+
+/// A hand model shared by every environment of a world (compared by identity).
+#[derive(Clone, Debug)]
+pub struct SharedHand(pub Arc<HandModel>);
+
+impl Default for SharedHand {
+    fn default() -> Self {
+        Self(crate::hand::builtin::model())
+    }
+}
+
+impl PartialEq for SharedHand {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl std::ops::Deref for SharedHand {
+    type Target = Arc<HandModel>;
+    fn deref(&self) -> &Arc<HandModel> {
+        &self.0
+    }
 }
 
 impl Benchmark {
     /// The benchmark that ships with the crate.
     pub fn builtin() -> Self {
-        match Self::from_json(BUILTIN, "crates/sim/data/benchmark.json") {
+        match Self::from_json(BUILTIN, "worlds/crm/benchmark.json") {
             Ok(benchmark) => benchmark,
             // The built-in file is checked by the crate's tests.
             Err(err) => panic!("built-in benchmark is invalid: {err}"),
         }
     }
 
-    /// Reads and validates a benchmark file.
+    /// Reads and validates a benchmark file; mesh parts are found next to it or in
+    /// `CRM_ASSETS`.
     pub fn load(path: &Path) -> Result<Self> {
+        Self::load_with(path, &Assets::from_env())
+    }
+
+    /// [`Benchmark::load`] with the asset folders given.
+    pub fn load_with(path: &Path, assets: &Assets) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
             path: path.display().to_string(),
             source,
         })?;
-        Self::from_json(&text, &path.display().to_string())
+        let base = path.parent().unwrap_or(Path::new("."));
+        Self::from_json_in(&text, &path.display().to_string(), base, assets)
     }
 
-    /// Parses and validates benchmark JSON; `origin` names the source in errors.
+    /// Parses and validates benchmark JSON; `origin` names the source in errors, mesh parts
+    /// are found from the working folder or in `CRM_ASSETS`.
     pub fn from_json(text: &str, origin: &str) -> Result<Self> {
-        let benchmark: Benchmark = parse_json(text, origin)?;
+        Self::from_json_in(text, origin, Path::new("."), &Assets::from_env())
+    }
+
+    /// Parses and validates benchmark JSON, reading mesh parts relative to `base`.
+    pub fn from_json_in(text: &str, origin: &str, base: &Path, assets: &Assets) -> Result<Self> {
+        let mut benchmark: Benchmark = parse_json(text, origin)?;
+        benchmark.load_meshes(origin, base, assets)?;
         benchmark.validate(origin)?;
         Ok(benchmark)
+    }
+
+    fn load_meshes(&mut self, origin: &str, base: &Path, assets: &Assets) -> Result<()> {
+        for (i, object) in self.objects.iter_mut().enumerate() {
+            for (k, part) in object.parts.iter_mut().enumerate() {
+                let Shape::Mesh {
+                    file,
+                    scale,
+                    axis_angle,
+                    decomposition,
+                    geometry,
+                } = &mut part.shape
+                else {
+                    continue;
+                };
+                let at = format!("objects[{i}] ({}).parts[{k}]", object.name);
+                let invalid = |field: &str, message: String| Error::Invalid {
+                    path: origin.to_string(),
+                    at: format!("{at}.{field}"),
+                    message,
+                };
+                if scale.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                    return Err(invalid("scale", format!("must be positive, got {scale:?}")));
+                }
+                if axis_angle.iter().any(|a| !a.is_finite()) {
+                    return Err(invalid("axis_angle", "must be finite".into()));
+                }
+                if decomposition.resolution < 8
+                    || decomposition.max_convex_hulls == 0
+                    || !(decomposition.concavity.is_finite() && decomposition.concavity > 0.0)
+                {
+                    return Err(invalid(
+                        "decomposition",
+                        "resolution >= 8, max_convex_hulls >= 1 and a positive concavity".into(),
+                    ));
+                }
+                let path = assets.file(file, base).ok_or_else(|| {
+                    invalid(
+                        "file",
+                        format!(
+                            "mesh {file:?} not found (relative to {}, or in CRM_ASSETS)",
+                            base.display()
+                        ),
+                    )
+                })?;
+                let loaded = mesh::load(&path, *scale, *axis_angle, decomposition)
+                    .map_err(|err| invalid("file", err.to_string()))?;
+                *geometry = Arc::new(loaded);
+            }
+        }
+        Ok(())
     }
 
     pub fn object(&self, name: &str) -> Option<&Object> {

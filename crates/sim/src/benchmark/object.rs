@@ -3,7 +3,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::mesh::{Decomposition, MeshGeometry};
 use super::taxonomy::Fragility;
+use std::sync::Arc;
 
 /// The axis of a cylinder or capsule part, in the object frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -37,10 +39,39 @@ pub enum Shape {
     Ball {
         radius: f32,
     },
+    /// An OBJ or STL file (relative to the benchmark file or found in `CRM_ASSETS`), scaled
+    /// per axis and then turned by `axis_angle` (a rotation vector, rad) into the part frame.
+    Mesh {
+        file: String,
+        #[serde(default = "unit_scale")]
+        scale: [f32; 3],
+        #[serde(default)]
+        axis_angle: [f32; 3],
+        /// VHACD's parameters, used when the mesh is not made of convex groups.
+        #[serde(default)]
+        decomposition: Decomposition,
+        /// The convex pieces, read when the benchmark loads.
+        #[serde(skip)]
+        geometry: Arc<MeshGeometry>,
+    },
+}
+
+fn unit_scale() -> [f32; 3] {
+    [1.0; 3]
 }
 
 impl Shape {
-    /// Half extents of the part's axis-aligned box in the object frame.
+    /// The part's axis-aligned bounds `(min, max)` about its position.
+    pub fn local_bounds(&self) -> ([f32; 3], [f32; 3]) {
+        if let Shape::Mesh { geometry, .. } = self {
+            return (geometry.min, geometry.max);
+        }
+        let half = self.half_box();
+        (half.map(|h| -h), half)
+    }
+
+    /// Half extents of a primitive part's axis-aligned box in the object frame (a mesh's
+    /// largest half extent about its position).
     pub fn half_box(&self) -> [f32; 3] {
         let along = |axis: Axis, half_length: f32, radius: f32| match axis {
             Axis::X => [half_length, radius, radius],
@@ -60,6 +91,9 @@ impl Shape {
                 axis,
             } => along(axis, half_height + radius, radius),
             Shape::Ball { radius } => [radius; 3],
+            Shape::Mesh { ref geometry, .. } => {
+                std::array::from_fn(|k| geometry.min[k].abs().max(geometry.max[k].abs()))
+            }
         }
     }
 
@@ -79,6 +113,7 @@ impl Shape {
                 ..
             } => PI * radius * radius * (2.0 * half_height + 4.0 / 3.0 * radius),
             Shape::Ball { radius } => 4.0 / 3.0 * PI * radius.powi(3),
+            Shape::Mesh { ref geometry, .. } => geometry.volume,
         }
     }
 
@@ -96,6 +131,7 @@ impl Shape {
                 ..
             } => vec![*radius, *half_height],
             Shape::Ball { radius } => vec![*radius],
+            Shape::Mesh { scale, .. } => scale.to_vec(),
         }
     }
 }
@@ -167,10 +203,10 @@ impl Object {
         let mut min = [f32::INFINITY; 3];
         let mut max = [f32::NEG_INFINITY; 3];
         for part in &self.parts {
-            let half = part.shape.half_box();
+            let (low, high) = part.shape.local_bounds();
             for axis in 0..3 {
-                min[axis] = min[axis].min(part.pos[axis] - half[axis]);
-                max[axis] = max[axis].max(part.pos[axis] + half[axis]);
+                min[axis] = min[axis].min(part.pos[axis] + low[axis]);
+                max[axis] = max[axis].max(part.pos[axis] + high[axis]);
             }
         }
         (min, max)

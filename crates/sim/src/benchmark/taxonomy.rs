@@ -84,16 +84,6 @@ pub enum Topology {
     InSiAd2,
 }
 
-const fn finger(active: bool, preshape: f32, closed: f32) -> FingerShape {
-    FingerShape {
-        active,
-        preshape,
-        closed,
-    }
-}
-
-const IDLE: FingerShape = finger(false, 0.0, 0.0);
-
 impl Topology {
     pub const ALL: [Topology; 6] = [
         Topology::Platform,
@@ -121,22 +111,6 @@ impl Topology {
 
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|t| t.name() == name)
-    }
-
-    /// The target hand shape, thumb first. Idle fingers stay straight, out of the grasp.
-    pub fn shape(self) -> [FingerShape; 5] {
-        let thumb = finger(true, 0.0, 1.9);
-        let closing = finger(true, 0.0, 1.6);
-        match self {
-            Topology::Platform => [IDLE; 5],
-            Topology::PoPmAb25 | Topology::PPdAb25 => [thumb, closing, closing, closing, closing],
-            Topology::PPdAb2 => [thumb, closing, IDLE, IDLE, IDLE],
-            Topology::PPdAb23 => [thumb, closing, closing, IDLE, IDLE],
-            // The thumb against the fully curled index. Without thumb rotation or finger
-            // abduction in the hand model, this differs from pPdAb2 only in how far the index
-            // curls.
-            Topology::InSiAd2 => [thumb, finger(true, 0.0, 1.7), IDLE, IDLE, IDLE],
-        }
     }
 }
 

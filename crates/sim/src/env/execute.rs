@@ -13,7 +13,6 @@ use crate::benchmark::{Objective, Topology};
 use crate::config::Protocol;
 use crate::error::Result;
 use crate::events::FailCause;
-use crate::hand::max_flex;
 use crate::ready::{ReadyTest, touch};
 use crate::script::{FINGER_SCALE, GRASP_SCALE, objective_action};
 
@@ -30,7 +29,12 @@ impl GraspEnv {
     /// The ready test of the current episode's object and topology.
     pub fn ready_test(&self) -> ReadyTest {
         let object = self.benchmark.object_of(self.task());
-        ReadyTest::for_object(self.topology(), object, self.config.ready_finger_force)
+        ReadyTest::for_object(
+            self.topology(),
+            &self.hand_shape(),
+            object,
+            self.config.ready_finger_force,
+        )
     }
 
     /// Whether the grasp of the last control step is ready for the arm. A press (with the
@@ -69,12 +73,12 @@ impl GraspEnv {
         let Some(scene) = &self.scene else {
             return false;
         };
-        let shape = self.topology().shape();
+        let shape = self.hand_shape();
         self.closing_fingers()
             && shape.iter().any(|f| f.active)
             && (0..5)
                 .filter(|&f| shape[f].active)
-                .all(|f| scene.hand.commands[f] >= max_flex(f) - 1e-4)
+                .all(|f| scene.hand.commands[f] >= scene.hand.model.max_command(f) - 1e-4)
     }
 
     /// Runs the arm's objective controller from the current state until the judge decides,

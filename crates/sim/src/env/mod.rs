@@ -6,12 +6,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::prelude::*;
 
-use crate::benchmark::{Benchmark, Objective, Task, Topology};
+use crate::benchmark::{Benchmark, FingerShape, Objective, Task, Topology};
 use crate::config::{FingerActions, Protocol, SimConfig};
 use crate::contacts::{ContactMetrics, object_contacts};
 use crate::error::{Error, Result};
 use crate::events::{FailCause, Judge, Snapshot};
-use crate::hand::{HAND_GROUP, max_flex};
+use crate::hand::HAND_GROUP;
 use crate::observation::{ACTIONS, MAX_FINGER_STEP, MAX_PALM_STEP, ObservationParts};
 use crate::scene::{self, Scene};
 
@@ -125,6 +125,20 @@ impl GraspEnv {
         Ok(())
     }
 
+    /// The observation as the world's robot senses it: features it cannot measure read 0.
+    fn sensed(&self) -> Vec<f32> {
+        let mut observation = self.parts.to_vec();
+        for &i in &self.benchmark.sensors_without {
+            observation[i] = 0.0;
+        }
+        observation
+    }
+
+    /// The current topology's finger shapes on this world's hand (thumb first).
+    pub fn hand_shape(&self) -> [FingerShape; 5] {
+        self.benchmark.hand.shape(self.topology())
+    }
+
     /// The grasp topology of the current task: the override, or the benchmark's.
     pub fn topology(&self) -> Topology {
         self.topologies
@@ -224,7 +238,7 @@ impl GraspEnv {
         task.topology = self.topology();
         let task = &task;
         let object = self.benchmark.object_of(task);
-        let scene = scene::build(task, object, &self.config, &mut rng);
+        let scene = scene::build(&self.benchmark.hand, task, object, &self.config, &mut rng);
         let mut judge = Judge::new(
             task,
             object.fragility.grasp_force_limit(),
@@ -241,7 +255,7 @@ impl GraspEnv {
         self.last_fail = None;
         self.hand_contacts = ContactMetrics::default();
         self.observe(&ContactMetrics::default())?;
-        Ok(self.parts.to_vec())
+        Ok(self.sensed())
     }
 
     /// Resets with the task picked by the task choice.
@@ -310,7 +324,7 @@ impl GraspEnv {
             events = self.execute_objective()?;
         }
         Ok(crm::EnvStep {
-            observation: self.parts.to_vec(),
+            observation: self.sensed(),
             events,
             truncated: self.steps >= self.config.max_episode_steps,
         })
@@ -326,12 +340,12 @@ impl GraspEnv {
     /// Adds increments (rad) to the active fingers' commands, within the topology's
     /// preshape and the joints' range.
     fn move_fingers(&mut self, increments: &[f32; 5]) -> Result<()> {
-        let shape = self.topology().shape();
+        let shape = self.hand_shape();
         let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
         for (finger, &step) in increments.iter().enumerate() {
             if shape[finger].active && step != 0.0 {
                 let command = (scene.hand.commands[finger] + step)
-                    .clamp(shape[finger].preshape, max_flex(finger));
+                    .clamp(shape[finger].preshape, scene.hand.model.max_command(finger));
                 scene.hand.set_command(&mut scene.world, finger, command);
             }
         }

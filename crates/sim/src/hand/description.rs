@@ -1,0 +1,430 @@
+//! A robot description (URDF through `rapier3d-urdf`, MJCF through `rapier3d-mjcf`) read into
+//! plain links and joints: each link's rest pose, collision shapes and mass, each joint's frames
+//! and limits. Nothing here is inserted into a physics world; [`super::HandModel`] builds hands
+//! from it at every reset.
+//!
+//! Both loaders are wrapped where they would be silent or wrong (measured with 0.36.1):
+//! `rapier3d-urdf` joins `package://` paths to a folder as plain text and drops a mesh it
+//! cannot open without a word, and `rapier3d-mjcf` refuses files whose `<include>`d parts have
+//! `<mujocoinclude>` roots. Mesh paths are resolved here (see [`crate::assets`]) and a missing
+//! mesh is an error naming it; includes are expanded here before the MJCF is parsed.
+
+use std::path::{Path, PathBuf};
+
+use rapier3d::prelude::*;
+use rapier3d_mjcf::{MjcfLoaderOptions, MjcfRobot};
+use rapier3d_urdf::{UrdfLoaderOptions, UrdfRobot, urdf_rs};
+
+use crate::assets::Assets;
+use crate::error::{Error, Result};
+
+/// Which format a description came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Source {
+    Urdf,
+    Mjcf,
+}
+
+/// One rigid link: its pose at rest (all joints at zero) in the description's frame, its
+/// collision shapes in the link frame, and its mass.
+#[derive(Clone, Debug)]
+pub struct Link {
+    pub name: String,
+    /// A body the loader added to hold one of several joints of one description body.
+    pub intermediate: bool,
+    pub rest: Pose,
+    pub shapes: Vec<(Pose, SharedShape)>,
+    /// kg; 0 when the description gives none.
+    pub mass: f32,
+}
+
+/// What a joint lets move.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum JointKind {
+    /// One rotation about the x axis of both frames.
+    Revolute,
+    /// Nothing: the child is welded to the parent.
+    Fixed,
+    /// Anything else (slide, ball): kept to count, refused in a hand.
+    Other,
+}
+
+/// One joint between two links (indices into [`Description::links`]).
+#[derive(Clone, Debug)]
+pub struct Joint {
+    pub name: String,
+    pub kind: JointKind,
+    pub parent: usize,
+    pub child: usize,
+    /// The joint frame in the parent's frame and in the child's; a revolute joint turns about
+    /// their x axis.
+    pub frame1: Pose,
+    pub frame2: Pose,
+    /// Angle limits (radians) when the description gives them.
+    pub limits: Option<[f32; 2]>,
+    /// A coupling the description declares (URDF `<mimic>`, MJCF `<equality><joint>` or a
+    /// fixed tendon of two joints with opposite coefficients, as Adroit couples DIP to PIP):
+    /// `angle = ratio * leader + offset`.
+    pub mimic: Option<Mimic>,
+    /// Whether the description declares it (loaders add unnamed fixed joints of their own).
+    pub declared: bool,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mimic {
+    pub leader: String,
+    pub ratio: f32,
+    pub offset: f32,
+}
+
+/// A description's links and joints.
+#[derive(Clone, Debug)]
+pub struct Description {
+    pub source: Source,
+    pub links: Vec<Link>,
+    pub joints: Vec<Joint>,
+}
+
+fn invalid(path: &Path, at: impl Into<String>, message: impl Into<String>) -> Error {
+    Error::Invalid {
+        path: path.display().to_string(),
+        at: at.into(),
+        message: message.into(),
+    }
+}
+
+fn read(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+impl Description {
+    /// Loads `path` (`.urdf` or `.xml`/`.mjcf`), resolving mesh files with `assets`.
+    pub fn load(path: &Path, assets: &Assets) -> Result<Self> {
+        let text = read(path)?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        match path.extension().and_then(|e| e.to_str()) {
+            Some("urdf") => Self::from_urdf(&text, path, base, assets),
+            Some("xml" | "mjcf") => Self::from_mjcf(&text, path, base),
+            _ => Err(invalid(
+                path,
+                "description",
+                "a hand description is a .urdf or an MJCF .xml file",
+            )),
+        }
+    }
+
+    /// Parses MJCF text; `path` names it in errors, `base` resolves its includes and meshes.
+    pub fn from_mjcf(text: &str, path: &Path, base: &Path) -> Result<Self> {
+        let expanded = expand_includes(text, path, base, 0)?;
+        let options = MjcfLoaderOptions {
+            disable_joint_motors: true,
+            mesh_converter: Some(MeshConverter::ConvexHull),
+            ..MjcfLoaderOptions::default()
+        };
+        let (robot, model) = MjcfRobot::from_str(&expanded, options, base)
+            .map_err(|err| invalid(path, "mujoco", format!("{err:#}")))?;
+        let links = robot
+            .bodies
+            .iter()
+            .enumerate()
+            .map(|(i, body)| Link {
+                name: body.name.clone().unwrap_or_else(|| format!("body{i}")),
+                intermediate: body.is_intermediate,
+                rest: *body.body.position(),
+                shapes: shapes_of(&body.colliders),
+                mass: body.mass,
+            })
+            .collect();
+        let mut joints: Vec<Joint> = Vec::new();
+        for (i, joint) in robot.joints.iter().enumerate() {
+            let name = joint.name.clone().unwrap_or_else(|| format!("joint{i}"));
+            let mut converted = convert_joint(name, joint.link1, joint.link2, &joint.joint);
+            converted.declared = joint.name.is_some();
+            joints.push(converted);
+        }
+        for tendon in &model.tendons {
+            if let [follower, leader] = tendon.joints.as_slice()
+                && follower.coef * leader.coef < 0.0
+                && let Some(joint) = joints.iter_mut().find(|j| j.name == follower.joint)
+                && joint.mimic.is_none()
+            {
+                joint.mimic = Some(Mimic {
+                    leader: leader.joint.clone(),
+                    ratio: (-leader.coef / follower.coef) as f32,
+                    offset: 0.0,
+                });
+            }
+        }
+        for coupling in robot.joint_couplings.iter().filter(|c| c.active) {
+            let leader = robot.joints[coupling.joint1].name.clone();
+            let follower = robot.joints[coupling.joint2].name.clone();
+            if let (Some(leader), Some(follower)) = (leader, follower)
+                && let Some(joint) = joints.iter_mut().find(|j| j.name == follower)
+            {
+                joint.mimic = Some(Mimic {
+                    leader,
+                    ratio: coupling.coeff,
+                    offset: coupling.offset,
+                });
+            }
+        }
+        Ok(Self {
+            source: Source::Mjcf,
+            links,
+            joints,
+        })
+    }
+
+    /// Parses URDF text; mesh files are resolved (`package://NAME/...`, relative to `base`,
+    /// or found through `assets`) before `rapier3d-urdf` sees them.
+    pub fn from_urdf(text: &str, path: &Path, base: &Path, assets: &Assets) -> Result<Self> {
+        let mut robot = urdf_rs::read_from_string(text)
+            .map_err(|err| invalid(path, "robot", err.to_string()))?;
+        for link in &mut robot.links {
+            let name = link.name.clone();
+            let geometries = link
+                .collision
+                .iter_mut()
+                .map(|c| ("collision", &mut c.geometry))
+                .chain(link.visual.iter_mut().map(|v| ("visual", &mut v.geometry)));
+            for (kind, geometry) in geometries {
+                if let urdf_rs::Geometry::Mesh { filename, .. } = geometry {
+                    let found = assets.mesh(filename, base).ok_or_else(|| {
+                        invalid(
+                            path,
+                            format!("link {name:?} {kind} mesh"),
+                            format!(
+                                "mesh {filename:?} not found (relative to {}, in a package of CRM_ASSETS, or in CRM_ASSETS)",
+                                base.display()
+                            ),
+                        )
+                    })?;
+                    *filename = found.display().to_string();
+                }
+            }
+        }
+        let options = UrdfLoaderOptions {
+            create_colliders_from_collision_shapes: true,
+            create_colliders_from_visual_shapes: false,
+            mesh_converter: Some(MeshConverter::ConvexHull),
+            ..UrdfLoaderOptions::default()
+        };
+        let loaded = UrdfRobot::from_robot(&robot, options, Path::new("/"));
+        let mut links = Vec::new();
+        for link in &loaded.links {
+            let source = &robot.links[link.urdf_link_index];
+            let colliders: Vec<Collider> =
+                link.colliders.iter().map(|c| c.collider.clone()).collect();
+            let meshes = source
+                .collision
+                .iter()
+                .filter(|c| matches!(c.geometry, urdf_rs::Geometry::Mesh { .. }))
+                .count();
+            if meshes > 0 && colliders.is_empty() {
+                return Err(invalid(
+                    path,
+                    format!("link {:?} collision mesh", source.name),
+                    "the mesh could not be read (empty, or not STL, OBJ or Collada)",
+                ));
+            }
+            links.push(Link {
+                name: source.name.clone(),
+                intermediate: false,
+                rest: *link.body.position(),
+                shapes: shapes_of(&colliders),
+                mass: source.inertial.mass.value as f32,
+            });
+        }
+        let mut joints = Vec::new();
+        for joint in &loaded.joints {
+            let source = &robot.joints[joint.source_urdf_joint_index()];
+            let mut converted =
+                convert_joint(source.name.clone(), joint.link1, joint.link2, &joint.joint);
+            converted.mimic = source.mimic.as_ref().map(|m| Mimic {
+                leader: m.joint.clone(),
+                ratio: m.multiplier.unwrap_or(1.0) as f32,
+                offset: m.offset.unwrap_or(0.0) as f32,
+            });
+            joints.push(converted);
+        }
+        Ok(Self {
+            source: Source::Urdf,
+            links,
+            joints,
+        })
+    }
+
+    pub fn link(&self, name: &str) -> Option<usize> {
+        self.links.iter().position(|l| l.name == name)
+    }
+
+    pub fn joint(&self, name: &str) -> Option<usize> {
+        self.joints.iter().position(|j| j.name == name)
+    }
+}
+
+fn shapes_of(colliders: &[Collider]) -> Vec<(Pose, SharedShape)> {
+    colliders
+        .iter()
+        .map(|c| {
+            // A collider not yet attached to a body keeps its local pose as its position.
+            (
+                c.position_wrt_parent().copied().unwrap_or(*c.position()),
+                c.shared_shape().clone(),
+            )
+        })
+        .collect()
+}
+
+fn convert_joint(name: String, parent: usize, child: usize, joint: &GenericJoint) -> Joint {
+    let kind = if joint.locked_axes == JointAxesMask::LOCKED_REVOLUTE_AXES {
+        JointKind::Revolute
+    } else if joint.locked_axes == JointAxesMask::LOCKED_FIXED_AXES {
+        JointKind::Fixed
+    } else {
+        JointKind::Other
+    };
+    let limits = (kind == JointKind::Revolute && joint.limit_axes.contains(JointAxesMask::ANG_X))
+        .then(|| {
+            let limit = joint.limits[JointAxis::AngX as usize];
+            [limit.min, limit.max]
+        });
+    Joint {
+        name,
+        kind,
+        parent,
+        child,
+        frame1: joint.local_frame1,
+        frame2: joint.local_frame2,
+        limits,
+        mimic: None,
+        declared: true,
+    }
+}
+
+/// Replaces each `<include file="..."/>` with the children of the included file's root
+/// (`<mujoco>` or `<mujocoinclude>`), recursively. MuJoCo resolves include paths against the
+/// main file's folder, as here.
+pub fn expand_includes(text: &str, path: &Path, base: &Path, depth: usize) -> Result<String> {
+    if depth > 16 {
+        return Err(invalid(
+            path,
+            "include",
+            "includes nest deeper than 16 files",
+        ));
+    }
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(start) = find_tag(rest, "include") {
+        out.push_str(&rest[..start]);
+        let Some(len) = rest[start..].find('>') else {
+            return Err(invalid(path, "include", "unterminated <include> element"));
+        };
+        let tag = &rest[start..start + len + 1];
+        let file = attribute(tag, "file")
+            .ok_or_else(|| invalid(path, "include", "an <include> without a file attribute"))?;
+        let included: PathBuf = base.join(&file);
+        let inner = read(&included)?;
+        out.push_str(&expand_includes(
+            root_children(&inner, &included)?,
+            &included,
+            base,
+            depth + 1,
+        )?);
+        rest = &rest[start + len + 1..];
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+/// Where an element named `name` opens in `text` (not one whose name merely starts so).
+fn find_tag(text: &str, name: &str) -> Option<usize> {
+    let pattern = format!("<{name}");
+    let mut from = 0;
+    while let Some(at) = text[from..].find(&pattern) {
+        let at = from + at;
+        let next = text[at + pattern.len()..].chars().next();
+        if matches!(next, Some(c) if c.is_whitespace() || c == '/' || c == '>') {
+            return Some(at);
+        }
+        from = at + pattern.len();
+    }
+    None
+}
+
+fn attribute(tag: &str, name: &str) -> Option<String> {
+    let at = tag.find(&format!("{name}="))? + name.len() + 1;
+    let quote = tag[at..].chars().next()?;
+    let value = &tag[at + 1..];
+    Some(value[..value.find(quote)?].to_string())
+}
+
+/// The text between the root element's start and end tags, skipping the XML declaration and
+/// comments before it.
+fn root_children<'a>(text: &'a str, path: &Path) -> Result<&'a str> {
+    let mut at = 0;
+    loop {
+        let Some(open) = text[at..].find('<') else {
+            return Err(invalid(path, "mujoco", "no root element"));
+        };
+        let open = at + open;
+        let rest = &text[open..];
+        if rest.starts_with("<?") {
+            at = open + rest.find("?>").map_or(rest.len(), |e| e + 2);
+        } else if rest.starts_with("<!--") {
+            at = open + rest.find("-->").map_or(rest.len(), |e| e + 3);
+        } else {
+            let name_end = rest[1..]
+                .find(|c: char| c.is_whitespace() || c == '>' || c == '/')
+                .map_or(rest.len(), |e| e + 1);
+            let name = &rest[1..name_end];
+            let Some(tag_end) = rest.find('>') else {
+                return Err(invalid(path, name, "unterminated root element"));
+            };
+            if rest[..tag_end].ends_with('/') {
+                return Ok("");
+            }
+            let body = &rest[tag_end + 1..];
+            let close = format!("</{name}");
+            let Some(end) = body.rfind(&close) else {
+                return Err(invalid(path, name, "the root element is not closed"));
+            };
+            return Ok(&body[..end]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn includes_are_expanded_without_their_roots() {
+        let dir = std::env::temp_dir().join(format!("crm-include-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("parts")).expect("dir");
+        std::fs::write(
+            dir.join("parts/chain.xml"),
+            "<?xml version=\"1.0\"?>\n<!-- a part -->\n<mujocoinclude><body name=\"b\"/><include file=\"parts/leaf.xml\"/></mujocoinclude>",
+        )
+        .expect("write");
+        std::fs::write(
+            dir.join("parts/leaf.xml"),
+            "<mujoco model=\"x\"><body name=\"c\"/></mujoco>",
+        )
+        .expect("write");
+        let main = "<mujoco><worldbody><include file=\"parts/chain.xml\"/></worldbody></mujoco>";
+        let expanded = expand_includes(main, &dir.join("main.xml"), &dir, 0).expect("expanded");
+        assert_eq!(
+            expanded,
+            "<mujoco><worldbody><body name=\"b\"/><body name=\"c\"/></worldbody></mujoco>"
+        );
+        let missing = "<mujoco><include file=\"nowhere.xml\"/></mujoco>";
+        let err = expand_includes(missing, &dir.join("main.xml"), &dir, 0).expect_err("missing");
+        assert!(err.to_string().contains("nowhere.xml"), "{err}");
+        std::fs::remove_dir_all(dir).ok();
+    }
+}

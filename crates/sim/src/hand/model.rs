@@ -1,0 +1,489 @@
+//! [`HandModel`]: a description and its profile checked against each other once, kept in
+//! memory so that every reset builds the hand without reading a file.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use rapier3d::prelude::*;
+
+use super::description::{Description, JointKind, Source};
+use super::profile::{Finger, Motor, Profile, Ratio, Wrist};
+use super::{ALPHA_DIP, ALPHA_MCP, ALPHA_TMCP};
+use crate::benchmark::{FINGERS, FingerShape, Topology};
+use crate::error::{Error, Result};
+
+/// A link of the hand: its pose at rest in the palm frame, shapes and mass.
+#[derive(Clone, Debug)]
+pub struct ModelLink {
+    pub name: String,
+    pub rest: Pose,
+    pub shapes: Vec<(Pose, SharedShape)>,
+    pub mass: f32,
+}
+
+/// A joint of the hand, parent before child (indices into [`HandModel::links`]).
+#[derive(Clone, Debug)]
+pub struct ModelJoint {
+    pub name: String,
+    pub kind: JointKind,
+    pub parent: usize,
+    pub child: usize,
+    pub frame1: Pose,
+    pub frame2: Pose,
+    pub limits: Option<[f32; 2]>,
+    /// Motor torque limit (N m).
+    pub torque: f32,
+}
+
+/// One of the paper's five finger actions on this hand.
+#[derive(Clone, Debug)]
+pub struct FingerModel {
+    /// `[open, closed]` command range (rad).
+    pub range: [f32; 2],
+    /// `(joint, ratio, offset)`: each follows `ratio * command + offset`, proximal first.
+    pub coupled: Vec<(usize, f32, f32)>,
+    /// Links whose contacts count as the finger's, proximal first.
+    pub links: Vec<usize>,
+}
+
+/// A hand ready to be built at any pose: links, joints, the finger actions and the shapes of
+/// the six topologies.
+#[derive(Clone, Debug)]
+pub struct HandModel {
+    pub source: Source,
+    /// Link 0 is the palm.
+    pub links: Vec<ModelLink>,
+    pub joints: Vec<ModelJoint>,
+    pub fingers: [FingerModel; 5],
+    /// Links whose contacts count as the palm's (the palm first).
+    pub palm_links: Vec<usize>,
+    pub grasp_point: Vec3,
+    /// The palm's orientation in the world at a task's zero yaw.
+    pub base_rotation: Rotation,
+    pub friction: f32,
+    pub wrist: Wrist,
+    pub motor: Motor,
+    shapes: BTreeMap<Topology, [FingerShape; 5]>,
+    /// Per topology, the angle of every joint no finger commands.
+    held: BTreeMap<Topology, Vec<(usize, f32)>>,
+}
+
+fn finite(values: &[f32]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+impl HandModel {
+    /// Checks `profile` against `description`; `path` (the profile's file) names errors.
+    pub fn new(description: &Description, profile: &Profile, path: &Path) -> Result<Self> {
+        let invalid = |at: String, message: String| Error::Invalid {
+            path: path.display().to_string(),
+            at,
+            message,
+        };
+        let palm = description.link(&profile.palm).ok_or_else(|| {
+            invalid(
+                "palm".into(),
+                format!("the description has no link {:?}", profile.palm),
+            )
+        })?;
+        // The palm's subtree, depth first in the description's order; joint k holds link
+        // k + 1 to its parent, and a hand is built in this order.
+        let mut order = vec![palm];
+        let mut joints_in = Vec::new();
+        subtree(description, palm, &mut order, &mut joints_in);
+        let palm_rest = description.links[palm].rest;
+        let links: Vec<ModelLink> = order
+            .iter()
+            .map(|&l| {
+                let link = &description.links[l];
+                ModelLink {
+                    name: link.name.clone(),
+                    rest: palm_rest.inverse() * link.rest,
+                    shapes: link.shapes.clone(),
+                    mass: link.mass,
+                }
+            })
+            .collect();
+        let link_index = |name: &str| links.iter().position(|l| l.name == name);
+        let position = |l: usize| order.iter().position(|&o| o == l).unwrap_or(0);
+        let joints: Vec<ModelJoint> = joints_in
+            .iter()
+            .map(|&j| {
+                let joint = &description.joints[j];
+                ModelJoint {
+                    name: joint.name.clone(),
+                    kind: joint.kind,
+                    parent: position(joint.parent),
+                    child: position(joint.child),
+                    frame1: joint.frame1,
+                    frame2: joint.frame2,
+                    limits: joint.limits,
+                    torque: profile.motor.torque,
+                }
+            })
+            .collect();
+        let mut model_joints = joints;
+        if let Some(joint) = model_joints.iter().find(|j| j.kind == JointKind::Other) {
+            return Err(invalid(
+                "palm".into(),
+                format!(
+                    "joint {:?} below the palm is neither revolute (hinge) nor fixed; a hand \
+                     holds only those",
+                    joint.name
+                ),
+            ));
+        }
+        let joint_index =
+            |joints: &[ModelJoint], name: &str| joints.iter().position(|j| j.name == name);
+
+        for (value, field) in [
+            (profile.friction, "friction"),
+            (profile.wrist.stiffness, "wrist.stiffness"),
+            (profile.wrist.damping, "wrist.damping"),
+            (profile.wrist.max_force, "wrist.max_force"),
+            (profile.motor.stiffness, "motor.stiffness"),
+            (profile.motor.damping, "motor.damping"),
+            (profile.motor.torque, "motor.torque"),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(invalid(
+                    field.into(),
+                    format!("must be finite and >= 0, got {value}"),
+                ));
+            }
+        }
+        let axis = |v: [f32; 3], field: &str| {
+            let v = Vec3::from(v);
+            if finite(&v.to_array()) && v.length() > 1e-6 {
+                Ok(v.normalize())
+            } else {
+                Err(invalid(
+                    field.into(),
+                    "must be a finite, non-zero vector".into(),
+                ))
+            }
+        };
+        let approach = axis(profile.approach_axis, "approach_axis")?;
+        let along = axis(profile.finger_axis, "finger_axis")?;
+        if approach.dot(along).abs() > 1e-3 {
+            return Err(invalid(
+                "finger_axis".into(),
+                "must be perpendicular to approach_axis".into(),
+            ));
+        }
+        if !finite(&profile.grasp_point) {
+            return Err(invalid("grasp_point".into(), "must be finite".into()));
+        }
+
+        let mut fingers = Vec::new();
+        let mut commanded = Vec::new();
+        for (f, finger) in profile.fingers.all().into_iter().enumerate() {
+            let at = format!("fingers.{}", FINGERS[f]);
+            fingers.push(finger_model(
+                f,
+                finger,
+                &at,
+                description,
+                &mut model_joints,
+                &link_index,
+                &invalid,
+            )?);
+            commanded.extend(fingers[f].coupled.iter().map(|c| c.0));
+            if joint_index(&model_joints, &finger.command).is_none() {
+                return Err(invalid(
+                    format!("{at}.command"),
+                    format!("the hand has no joint {:?} below the palm", finger.command),
+                ));
+            }
+        }
+        let fingers: [FingerModel; 5] = fingers
+            .try_into()
+            .map_err(|_| invalid("fingers".into(), "five fingers".into()))?;
+
+        let mut palm_links = vec![0];
+        for (k, name) in profile.palm_links.iter().enumerate() {
+            let link = link_index(name).ok_or_else(|| {
+                invalid(
+                    format!("palm_links[{k}]"),
+                    format!("the hand has no link {name:?}"),
+                )
+            })?;
+            palm_links.push(link);
+        }
+
+        let finger_index = |name: &str, at: &str| {
+            FINGERS.iter().position(|f| *f == name).ok_or_else(|| {
+                invalid(
+                    at.to_string(),
+                    format!("unknown finger {name:?}; one of {FINGERS:?}"),
+                )
+            })
+        };
+        let mut shapes = BTreeMap::new();
+        let mut held = BTreeMap::new();
+        for topology in Topology::ALL {
+            let at = format!("topologies.{}", topology.name());
+            let Some(shape) = profile.topologies.get(&topology) else {
+                return Err(invalid(at, "every topology needs a shape".into()));
+            };
+            let mut fingers_shape = [FingerShape {
+                active: false,
+                preshape: 0.0,
+                closed: 0.0,
+            }; 5];
+            for name in &shape.active {
+                fingers_shape[finger_index(name, &format!("{at}.active"))?].active = true;
+            }
+            for (field, values) in [("preshape", &shape.preshape), ("closed", &shape.closed)] {
+                for (name, &value) in values {
+                    let f = finger_index(name, &format!("{at}.{field}"))?;
+                    let [lo, hi] = fingers[f].range;
+                    if !(value.is_finite() && value >= lo.min(hi) && value <= lo.max(hi)) {
+                        return Err(invalid(
+                            format!("{at}.{field}.{name}"),
+                            format!(
+                                "must be within the finger's range {:?}, got {value}",
+                                fingers[f].range
+                            ),
+                        ));
+                    }
+                    if field == "preshape" {
+                        fingers_shape[f].preshape = value;
+                    } else {
+                        fingers_shape[f].closed = value;
+                    }
+                }
+            }
+            let mut angles: Vec<(usize, f32)> = model_joints
+                .iter()
+                .enumerate()
+                .filter(|(j, joint)| joint.kind == JointKind::Revolute && !commanded.contains(j))
+                .map(|(j, _)| (j, 0.0))
+                .collect();
+            for (field, values) in [
+                ("held", &profile.held),
+                (&*format!("{at}.held"), &shape.held),
+            ] {
+                for (name, &value) in values {
+                    let Some(j) = joint_index(&model_joints, name) else {
+                        return Err(invalid(
+                            format!("{field}.{name}"),
+                            format!("the hand has no joint {name:?} below the palm"),
+                        ));
+                    };
+                    let Some(entry) = angles.iter_mut().find(|(k, _)| *k == j) else {
+                        return Err(invalid(
+                            format!("{field}.{name}"),
+                            "a finger commands this joint; it cannot also be held".into(),
+                        ));
+                    };
+                    if !value.is_finite() {
+                        return Err(invalid(format!("{field}.{name}"), "must be finite".into()));
+                    }
+                    entry.1 = value;
+                }
+            }
+            shapes.insert(topology, fingers_shape);
+            held.insert(topology, angles);
+        }
+        if let Some(name) = profile
+            .topologies
+            .keys()
+            .find(|t| !Topology::ALL.contains(t))
+        {
+            return Err(invalid(
+                format!("topologies.{}", name.name()),
+                "unknown topology".into(),
+            ));
+        }
+
+        // Rows of the palm's world rotation at zero yaw: fingers along +x, approach along -z.
+        let side = (-approach).cross(along);
+        let base_rotation =
+            if (along - Vec3::X).length() < 1e-7 && (approach + Vec3::Z).length() < 1e-7 {
+                Rotation::IDENTITY
+            } else {
+                // The rotation taking the palm frame's (along, side, -approach) to world (x, y, z).
+                Rotation::from_mat3(
+                    &rapier3d::math::Matrix::from_cols(along, side, -approach).transpose(),
+                )
+            };
+        Ok(Self {
+            source: description.source,
+            links,
+            joints: model_joints,
+            fingers,
+            palm_links,
+            grasp_point: Vec3::from(profile.grasp_point),
+            base_rotation,
+            friction: profile.friction,
+            wrist: profile.wrist,
+            motor: profile.motor,
+            shapes,
+            held,
+        })
+    }
+
+    /// The topology's finger shapes, thumb first.
+    pub fn shape(&self, topology: Topology) -> [FingerShape; 5] {
+        self.shapes.get(&topology).copied().unwrap_or(
+            [FingerShape {
+                active: false,
+                preshape: 0.0,
+                closed: 0.0,
+            }; 5],
+        )
+    }
+
+    /// The joints held still in `topology` and their angles.
+    pub fn held(&self, topology: Topology) -> &[(usize, f32)] {
+        self.held.get(&topology).map_or(&[], Vec::as_slice)
+    }
+
+    /// The most closed command of a finger.
+    pub fn max_command(&self, finger: usize) -> f32 {
+        self.fingers[finger].range[1]
+    }
+
+    /// The joints that move, by name (revolute).
+    pub fn revolute_joints(&self) -> usize {
+        self.joints
+            .iter()
+            .filter(|j| j.kind == JointKind::Revolute)
+            .count()
+    }
+}
+
+fn subtree(
+    description: &Description,
+    link: usize,
+    order: &mut Vec<usize>,
+    joints: &mut Vec<usize>,
+) {
+    for (j, joint) in description.joints.iter().enumerate() {
+        if joint.parent == link && !order.contains(&joint.child) {
+            order.push(joint.child);
+            joints.push(j);
+            subtree(description, joint.child, order, joints);
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn finger_model(
+    f: usize,
+    finger: &Finger,
+    at: &str,
+    description: &Description,
+    joints: &mut [ModelJoint],
+    link_index: &dyn Fn(&str) -> Option<usize>,
+    invalid: &dyn Fn(String, String) -> Error,
+) -> Result<FingerModel> {
+    let [lo, hi] = finger.range;
+    if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+        return Err(invalid(
+            format!("{at}.range"),
+            format!("must be finite with open < closed, got {:?}", finger.range),
+        ));
+    }
+    if finger.joints.is_empty() {
+        return Err(invalid(
+            format!("{at}.joints"),
+            "a finger needs at least one joint".into(),
+        ));
+    }
+    if !finger.joints.iter().any(|c| c.joint == finger.command) {
+        return Err(invalid(
+            format!("{at}.command"),
+            format!("{:?} must be one of the finger's joints", finger.command),
+        ));
+    }
+    let mut coupled = Vec::new();
+    let mut links = Vec::new();
+    for (k, entry) in finger.joints.iter().enumerate() {
+        let field = format!("{at}.joints[{k}]");
+        let Some(j) = joints.iter().position(|j| j.name == entry.joint) else {
+            return Err(invalid(
+                format!("{field}.joint"),
+                format!("the hand has no joint {:?} below the palm", entry.joint),
+            ));
+        };
+        if joints[j].kind != JointKind::Revolute {
+            return Err(invalid(
+                format!("{field}.joint"),
+                "a finger joint must be revolute".into(),
+            ));
+        }
+        let mimic = description
+            .joint(&entry.joint)
+            .and_then(|d| description.joints[d].mimic.clone())
+            .filter(|m| m.leader == finger.command);
+        let ratio = match &entry.ratio {
+            Some(Ratio::Value(value)) => *value,
+            Some(Ratio::Named(name)) => match (name.as_str(), f) {
+                ("pip", _) | ("tmcp", _) => 1.0,
+                ("mcp", 1..) => ALPHA_MCP,
+                ("dip", 1..) => ALPHA_DIP[f - 1],
+                ("ip", 0) => ALPHA_TMCP,
+                ("description", _) => mimic.as_ref().map(|m| m.ratio).ok_or_else(|| {
+                    invalid(
+                        format!("{field}.ratio"),
+                        format!(
+                            "the description declares no coupling of {:?} to {:?}",
+                            entry.joint, finger.command
+                        ),
+                    )
+                })?,
+                _ => {
+                    return Err(invalid(
+                        format!("{field}.ratio"),
+                        format!(
+                            "{name:?} is not a coupling of this finger (pip, tmcp, mcp, dip, ip, description)"
+                        ),
+                    ));
+                }
+            },
+            None if entry.joint == finger.command => 1.0,
+            None => mimic.as_ref().map(|m| m.ratio).ok_or_else(|| {
+                invalid(
+                    format!("{field}.ratio"),
+                    "needed: the description declares no coupling for this joint".into(),
+                )
+            })?,
+        };
+        let offset = entry
+            .offset
+            .or_else(|| mimic.as_ref().map(|m| m.offset))
+            .unwrap_or(0.0);
+        if !(ratio.is_finite() && offset.is_finite()) {
+            return Err(invalid(format!("{field}.ratio"), "must be finite".into()));
+        }
+        if let Some(torque) = entry.torque {
+            if !(torque.is_finite() && torque > 0.0) {
+                return Err(invalid(
+                    format!("{field}.torque"),
+                    format!("must be positive, got {torque}"),
+                ));
+            }
+            joints[j].torque = torque;
+        }
+        coupled.push((j, ratio, offset));
+        links.push(joints[j].child);
+    }
+    if !finger.links.is_empty() {
+        links.clear();
+        for (k, name) in finger.links.iter().enumerate() {
+            links.push(link_index(name).ok_or_else(|| {
+                invalid(
+                    format!("{at}.links[{k}]"),
+                    format!("the hand has no link {name:?} below the palm"),
+                )
+            })?);
+        }
+    }
+    Ok(FingerModel {
+        range: finger.range,
+        coupled,
+        links,
+    })
+}

@@ -1,0 +1,307 @@
+//! A world is a folder: `world.json` names the hand (a profile, which names its description),
+//! the objects and tasks (a benchmark file), the CRM spec, the randomization and what the
+//! robot senses. File names are relative to the folder or found in `CRM_ASSETS`.
+//!
+//! ```json
+//! { "name": "crm", "hand": "hand.json", "benchmark": "benchmark.json",
+//!   "spec": null, "randomization": null, "sensors": { "without": ["o_force"] } }
+//! ```
+//!
+//! The built-in world (`worlds/crm/`) is compiled in: [`World::builtin`].
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::assets::Assets;
+use crate::benchmark::{Benchmark, SharedHand};
+use crate::config::Randomization;
+use crate::error::{Error, Result, parse_json};
+use crate::hand::HandModel;
+use crate::hand::description::{Description, Source};
+use crate::hand::profile::Profile;
+use crate::observation::FEATURES;
+
+/// `world.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldFile {
+    /// Letters, digits, `-`, `_` and `.`; what jobs and checkpoints call the world.
+    pub name: String,
+    /// The hand profile.
+    pub hand: String,
+    /// Objects and tasks (default: the built-in benchmark).
+    #[serde(default)]
+    pub benchmark: Option<String>,
+    /// The CRM spec (default: the built-in grasping spec).
+    #[serde(default)]
+    pub spec: Option<String>,
+    /// Domain randomization (default: the paper's, `SimConfig::default`).
+    #[serde(default)]
+    pub randomization: Option<Randomization>,
+    /// What the robot senses (default: every feature).
+    #[serde(default)]
+    pub sensors: Sensors,
+}
+
+/// Observation features a real robot cannot measure: features by name (`force_x`) or the
+/// paper's groups (`n_c`, `o_dist`, `o_object`, `o_cone`, `o_relative`, `o_force`,
+/// `o_torque`), read as zero.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sensors {
+    #[serde(default)]
+    pub without: Vec<String>,
+}
+
+/// The indices of [`FEATURES`] that a group or feature name covers.
+pub fn feature_indices(name: &str) -> Option<Vec<usize>> {
+    let group: &[&str] = match name {
+        "n_c" => &["n_c"],
+        "o_dist" => &["dist"],
+        "o_object" => &["object_x", "object_y", "object_z"],
+        "o_cone" => &["cone"],
+        "o_relative" => &[
+            "rel_x",
+            "rel_y",
+            "rel_z",
+            "in_hand_x",
+            "in_hand_y",
+            "in_hand_z",
+        ],
+        "o_force" => &["force_x", "force_y", "force_z"],
+        "o_torque" => &["torque_x", "torque_y", "torque_z"],
+        other => return FEATURES.iter().position(|f| *f == other).map(|i| vec![i]),
+    };
+    Some(
+        group
+            .iter()
+            .filter_map(|g| FEATURES.iter().position(|f| f == g))
+            .collect(),
+    )
+}
+
+/// A loaded world.
+#[derive(Clone, Debug)]
+pub struct World {
+    pub name: String,
+    /// The folder it came from (`None`: built in).
+    pub dir: Option<PathBuf>,
+    pub source: Source,
+    /// Objects, tasks, the hand and the sensors, ready for environments.
+    pub benchmark: Arc<Benchmark>,
+    pub spec: Option<crm::Spec>,
+    pub randomization: Option<Randomization>,
+    /// A hash of what shapes a policy's observation and action: the hand profile, the spec
+    /// and the sensors (never where the files lie).
+    pub hash: String,
+}
+
+fn io(path: &Path, source: std::io::Error) -> Error {
+    Error::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+impl World {
+    /// The built-in world, `worlds/crm/`, compiled in.
+    pub fn builtin() -> Self {
+        let benchmark = Benchmark::builtin();
+        let hash = world_hash(
+            crate::hand::builtin::PROFILE,
+            &spec_text(&crate::spec::grasping_spec()),
+            &[],
+        );
+        Self {
+            name: "crm".into(),
+            dir: None,
+            source: benchmark.hand.source,
+            benchmark: Arc::new(benchmark),
+            spec: None,
+            randomization: None,
+            hash,
+        }
+    }
+
+    /// Loads the world in `dir`, finding files through `CRM_ASSETS`.
+    pub fn load(dir: &Path) -> Result<Self> {
+        Self::load_with(dir, &Assets::from_env())
+    }
+
+    /// Loads the world in `dir`, finding files through `assets`.
+    pub fn load_with(dir: &Path, assets: &Assets) -> Result<Self> {
+        let path = dir.join("world.json");
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(&path).map_err(|source| io(&path, source))?;
+        let file: WorldFile = parse_json(&text, &origin)?;
+        let invalid = |at: &str, message: String| Error::Invalid {
+            path: origin.clone(),
+            at: at.to_string(),
+            message,
+        };
+        if file.name.is_empty()
+            || file.name.len() > 64
+            || !file
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
+        {
+            return Err(invalid(
+                "name",
+                format!(
+                    "1 to 64 letters, digits, '-', '_' or '.', got {:?}",
+                    file.name
+                ),
+            ));
+        }
+        let find = |field: &str, name: &str| {
+            assets.file(name, dir).ok_or_else(|| {
+                invalid(
+                    field,
+                    format!(
+                        "{name:?} not found (in {}, or in CRM_ASSETS)",
+                        dir.display()
+                    ),
+                )
+            })
+        };
+        let profile_path = find("hand", &file.hand)?;
+        let profile_text =
+            std::fs::read_to_string(&profile_path).map_err(|source| io(&profile_path, source))?;
+        let profile: Profile = parse_json(&profile_text, &profile_path.display().to_string())?;
+        let profile_dir = profile_path.parent().unwrap_or(dir);
+        let description_path = assets
+            .file(&profile.description, profile_dir)
+            .ok_or_else(|| Error::Invalid {
+                path: profile_path.display().to_string(),
+                at: "description".into(),
+                message: format!(
+                    "{:?} not found (in {}, or in CRM_ASSETS)",
+                    profile.description,
+                    profile_dir.display()
+                ),
+            })?;
+        let description = Description::load(&description_path, assets)?;
+        let hand = HandModel::new(&description, &profile, &profile_path)?;
+
+        let mut benchmark = match &file.benchmark {
+            Some(name) => Benchmark::load_with(&find("benchmark", name)?, assets)?,
+            None => Benchmark::builtin(),
+        };
+        benchmark.hand = SharedHand(Arc::new(hand));
+        let (spec, spec_text) = match &file.spec {
+            Some(name) => {
+                let spec_path = find("spec", name)?;
+                let spec = crm::Spec::load(&spec_path)?;
+                crate::spec::check_compatible(&spec)?;
+                let text = spec_text(&spec);
+                (Some(spec), text)
+            }
+            None => (None, spec_text(&crate::spec::grasping_spec())),
+        };
+        let mut without = Vec::new();
+        for (k, name) in file.sensors.without.iter().enumerate() {
+            let indices = feature_indices(name).ok_or_else(|| {
+                invalid(
+                    &format!("sensors.without[{k}]"),
+                    format!(
+                        "{name:?} is neither an observation feature nor one of the paper's groups"
+                    ),
+                )
+            })?;
+            without.extend(indices);
+        }
+        without.sort_unstable();
+        without.dedup();
+        benchmark.sensors_without = without.clone();
+        if let Some(randomization) = &file.randomization
+            && [
+                randomization.position,
+                randomization.yaw,
+                randomization.joint,
+            ]
+            .iter()
+            .any(|v| !(v.is_finite() && *v >= 0.0))
+        {
+            return Err(invalid(
+                "randomization",
+                "widths must be finite and >= 0".into(),
+            ));
+        }
+        Ok(Self {
+            name: file.name,
+            dir: Some(dir.to_path_buf()),
+            source: description.source,
+            benchmark: Arc::new(benchmark),
+            spec,
+            randomization: file.randomization,
+            hash: world_hash(&canonical(&profile_text), &spec_text, &without),
+        })
+    }
+
+    /// Revolute joints of the hand, its links and the fingers it acts with.
+    pub fn summary(&self) -> serde_json::Value {
+        let hand = &self.benchmark.hand;
+        serde_json::json!({
+            "world": self.name,
+            "hand": {
+                "source": self.source,
+                "links": hand.links.len(),
+                "joints": hand.revolute_joints(),
+                "fingers": 5,
+            },
+            "objects": self.benchmark.objects.len(),
+            "tasks": self.benchmark.tasks.len(),
+            "hash": self.hash,
+        })
+    }
+}
+
+fn spec_text(spec: &crm::Spec) -> String {
+    serde_json::to_string(spec).unwrap_or_default()
+}
+
+/// A profile re-serialized, so whitespace and key order do not change a world's hash.
+fn canonical(text: &str) -> String {
+    serde_json::from_str::<serde_json::Value>(text)
+        .map(|v| v.to_string())
+        .unwrap_or_else(|_| text.to_string())
+}
+
+fn world_hash(profile: &str, spec: &str, without: &[usize]) -> String {
+    let mut hasher = Sha256::new();
+    hasher.update(canonical(profile).as_bytes());
+    hasher.update([0]);
+    hasher.update(canonical(spec).as_bytes());
+    hasher.update([0]);
+    hasher.update(format!("{without:?}").as_bytes());
+    let digest = hasher.finalize();
+    digest.iter().take(8).map(|b| format!("{b:02x}")).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn groups_and_features_name_observation_indices() {
+        assert_eq!(feature_indices("o_force").map(|v| v.len()), Some(3));
+        assert_eq!(feature_indices("cone"), Some(vec![5]));
+        assert_eq!(feature_indices("o_cone"), Some(vec![5]));
+        assert_eq!(feature_indices("nothing"), None);
+    }
+
+    #[test]
+    fn the_builtin_world_folder_is_the_compiled_in_world() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/crm");
+        let world = World::load_with(&dir, &Assets::default()).expect("worlds/crm");
+        let builtin = World::builtin();
+        assert_eq!(world.name, builtin.name);
+        assert_eq!(world.hash, builtin.hash);
+        assert_eq!(world.benchmark.tasks, builtin.benchmark.tasks);
+        assert_eq!(world.summary()["hand"]["joints"], 14);
+    }
+}

@@ -1,0 +1,185 @@
+//! A world folder through the `crm` binary, as a user runs it: check, oracle on two tasks, two
+//! training iterations, evaluation and a recording; a checkpoint from another hand refused;
+//! a broken world refused with exit code 2 naming the file and the field.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Runs `crm` with `CRM_ASSETS` pointing at the test world's assets.
+fn crm(root: &Path, args: &[&str]) -> (i32, String, String) {
+    let output = Command::new(env!("CARGO_BIN_EXE_crm"))
+        .args(args)
+        .env("CRM_ASSETS", root.join("assets"))
+        .output()
+        .expect("crm runs");
+    (
+        output.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&output.stdout).into_owned(),
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+    )
+}
+
+fn test_world() -> PathBuf {
+    let root = std::env::temp_dir().join(format!("crm-cli-world-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/make-test-world");
+    let status = Command::new("python3")
+        .arg(&script)
+        .arg(&root)
+        .status()
+        .expect("python3 runs scripts/make-test-world");
+    assert!(status.success());
+    root
+}
+
+#[test]
+fn a_world_folder_round_trip_and_a_checkpoint_from_another_hand_refused() {
+    let root = test_world();
+    let world = root.join("world");
+    let world_arg = world.to_str().expect("utf-8 path");
+
+    let (code, stdout, stderr) = crm(&root, &["world", "check", world_arg]);
+    assert_eq!(code, 0, "{stderr}");
+    let check: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
+    assert_eq!(check["world"], "test-hand");
+    assert_eq!(check["hand"]["source"], "urdf");
+    assert_eq!(check["hand"]["joints"], 14);
+    assert_eq!(check["hand"]["fingers"], 5);
+    assert_eq!(
+        (check["objects"].as_u64(), check["tasks"].as_u64()),
+        (Some(2), Some(3))
+    );
+
+    let (code, stdout, stderr) = crm(
+        &root,
+        &[
+            "oracle",
+            "--world",
+            world_arg,
+            "--json",
+            "--seeds",
+            "1",
+            "--task",
+            "mug-wrap",
+            "--task",
+            "blocks-lift",
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let oracle: serde_json::Value = serde_json::from_str(&stdout).expect("oracle JSON");
+    assert_eq!(oracle["episodes"], 2);
+
+    let out = root.join("run");
+    let config = root.join("ppo.json");
+    std::fs::write(
+        &config,
+        r#"{"rollout_steps": 128, "minibatch_size": 64, "hidden": [32]}"#,
+    )
+    .expect("config");
+    let (code, _, stderr) = crm(
+        &root,
+        &[
+            "train",
+            "--world",
+            world_arg,
+            "--steps",
+            "256",
+            "--envs",
+            "2",
+            "--seed",
+            "3",
+            "--config",
+            config.to_str().expect("utf-8"),
+            "--out",
+            out.to_str().expect("utf-8"),
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let metrics = std::fs::read_to_string(out.join("metrics.jsonl")).expect("metrics");
+    assert_eq!(metrics.lines().count(), 2, "two iterations of 128 steps");
+    let checkpoint = out.join("crm-ppo.safetensors");
+    let checkpoint = checkpoint.to_str().expect("utf-8");
+
+    let (code, stdout, stderr) = crm(
+        &root,
+        &[
+            "eval",
+            "--world",
+            world_arg,
+            "--checkpoint",
+            checkpoint,
+            "--episodes",
+            "2",
+            "--json",
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("eval JSON");
+    assert_eq!(report["episodes"], 2);
+
+    let recording = root.join("episode.rrd");
+    let (code, stdout, stderr) = crm(
+        &root,
+        &[
+            "record",
+            "--world",
+            world_arg,
+            "--checkpoint",
+            checkpoint,
+            "--task",
+            "mug-wrap",
+            "--out",
+            recording.to_str().expect("utf-8"),
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("mug-wrap"), "{stdout}");
+    assert!(std::fs::metadata(&recording).expect("rrd").len() > 1000);
+
+    // The same checkpoint in the built-in world, and the shipped model in this one: refused.
+    let (code, _, stderr) = crm(
+        &root,
+        &["eval", "--checkpoint", checkpoint, "--episodes", "1"],
+    );
+    assert_eq!(code, 2);
+    assert!(
+        stderr.contains("test-hand") && stderr.contains("world"),
+        "{stderr}"
+    );
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/crm-ppo.safetensors");
+    let (code, _, stderr) = crm(
+        &root,
+        &[
+            "eval",
+            "--world",
+            world_arg,
+            "--checkpoint",
+            shipped.to_str().expect("utf-8"),
+            "--episodes",
+            "1",
+        ],
+    );
+    assert_eq!(code, 2);
+    assert!(
+        stderr.contains("\"crm\"") && stderr.contains("differ"),
+        "{stderr}"
+    );
+
+    // A profile naming a joint the description lacks.
+    let profile = world.join("hand.json");
+    let text = std::fs::read_to_string(&profile).expect("profile");
+    std::fs::write(&profile, text.replacen("\"thumb_ip\"", "\"thumb_tip\"", 1)).expect("write");
+    for args in [
+        vec!["world", "check", world_arg],
+        vec!["oracle", "--world", world_arg, "--seeds", "1"],
+        vec!["bench", "env", "--world", world_arg],
+    ] {
+        let (code, _, stderr) = crm(&root, &args);
+        assert_eq!(code, 2, "{args:?}");
+        assert!(
+            stderr.contains("hand.json") && stderr.contains("fingers.thumb.joints[1].joint"),
+            "{args:?}: {stderr}"
+        );
+    }
+    std::fs::remove_dir_all(root).ok();
+}
