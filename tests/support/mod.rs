@@ -69,7 +69,13 @@ pub struct Server {
 
 /// Starts `crm-server` on free ports with `data` and extra flags; waits for its address line.
 pub fn start_server(data: &Path, extra: &[&str]) -> Server {
+    start_server_with(data, extra, &[])
+}
+
+/// [`start_server`] with environment variables set for the coordinator.
+pub fn start_server_with(data: &Path, extra: &[&str], env: &[(&str, &Path)]) -> Server {
     let mut child = Command::new(crm_server())
+        .envs(env.iter().copied())
         .args([
             "--http",
             "127.0.0.1:0",
@@ -112,8 +118,14 @@ pub fn start_server(data: &Path, extra: &[&str]) -> Server {
 
 /// Starts `crm worker` against `grpc` with extra flags.
 pub fn start_worker(grpc: &str, extra: &[&str]) -> Proc {
+    start_worker_with(grpc, extra, &[])
+}
+
+/// [`start_worker`] with environment variables set for the worker.
+pub fn start_worker_with(grpc: &str, extra: &[&str], env: &[(&str, &Path)]) -> Proc {
     Proc(
         Command::new(crm())
+            .envs(env.iter().copied())
             .args(["worker", "--coordinator", grpc, "--poll-s", "0.2"])
             .args(extra)
             .env("RUST_LOG", "warn")

@@ -29,7 +29,11 @@ export async function renderJobs(main) {
   }, el('option', { value: '' }, 'all'), values.map((v) => el('option', { value: v, selected: v === filters[name] }, v))));
 
   let catalog = { tasks: [], topologies: [] };
-  try { catalog = await getJson('/api/v1/tasks'); } catch (err) { message.replaceChildren(errorBox(err)); }
+  let worlds = [{ name: 'crm', builtin: true }];
+  try {
+    catalog = await getJson('/api/v1/tasks');
+    worlds = (await getJson('/api/v1/worlds')).worlds;
+  } catch (err) { message.replaceChildren(errorBox(err)); }
 
   main.replaceChildren(
     el('h1', {}, 'Jobs'),
@@ -41,7 +45,7 @@ export async function renderJobs(main) {
       el('thead', {}, el('tr', {},
         ['', 'id', 'kind', 'state', 'algorithm', 'tasks', 'progress', 'steps/s', 'worker', 'started', 'duration', 'result', ''].map((h) => el('th', {}, h)))),
       tbody),
-    submitForm(catalog, (job) => {
+    submitForm(catalog, worlds, (job) => {
       message.replaceChildren(el('div', { class: 'ok' }, `Job ${job.id} queued.`));
       refresh();
     }));
@@ -121,15 +125,17 @@ export async function renderJobs(main) {
 }
 
 /** The submit form; API errors appear next to the field they name. */
-function submitForm(catalog, onQueued) {
+function submitForm(catalog, worlds, onQueued) {
   const field = (name, label, input, help) => el('div', { class: 'field', 'data-field': name },
     el('label', { for: `f-${name}` }, label), input, help ? el('small', { class: 'muted' }, help) : null,
     el('div', { class: 'field-error', 'data-error-for': name }));
   const kind = el('select', { id: 'f-kind', name: 'kind' }, el('option', { value: 'train' }, 'train'), el('option', { value: 'eval' }, 'eval'));
+  const taskOptions = (list) => list.map((t) => el('option', { value: t.id }, `${t.id} (${t.topology})`));
   const inputs = {
+    world: el('select', { id: 'f-world', name: 'world' },
+      worlds.map((w) => el('option', { value: w.name }, w.builtin ? `${w.name} (built in)` : `${w.name} (${w.tasks} tasks)`))),
     algorithm: el('select', { id: 'f-algorithm', name: 'algorithm' }, ALGORITHMS.map((a) => el('option', { value: a }, a))),
-    tasks: el('select', { id: 'f-tasks', name: 'tasks', multiple: true, size: 6 },
-      catalog.tasks.map((t) => el('option', { value: t.id }, `${t.id} (${t.topology})`))),
+    tasks: el('select', { id: 'f-tasks', name: 'tasks', multiple: true, size: 6 }, taskOptions(catalog.tasks)),
     steps: el('input', { id: 'f-steps', name: 'steps', type: 'text', inputmode: 'numeric', value: '20000' }),
     seed: el('input', { id: 'f-seed', name: 'seed', type: 'text', inputmode: 'numeric', value: '0' }),
     topology: el('select', { id: 'f-topology', name: 'topology' },
@@ -165,11 +171,19 @@ function submitForm(catalog, onQueued) {
     evalOnly.forEach((f) => { f.hidden = kind.value !== 'eval'; });
   };
   kind.addEventListener('change', show);
+  // Another world has other tasks.
+  inputs.world.addEventListener('change', async () => {
+    try {
+      const other = await getJson(`/api/v1/tasks?world=${encodeURIComponent(inputs.world.value)}`);
+      inputs.tasks.replaceChildren(...taskOptions(other.tasks));
+    } catch (err) { showError(form, formError, err); }
+  });
 
   const form = el('form', { id: 'submit-job', class: 'card', novalidate: true },
     el('h2', {}, 'Submit a job'),
     el('div', { class: 'grid' },
-      field('kind', 'kind', kind), ...trainOnly, ...evalOnly,
+      field('kind', 'kind', kind), field('world', 'world', inputs.world, 'the hand, objects and tasks (GET /api/v1/worlds)'),
+      ...trainOnly, ...evalOnly,
       field('tasks', 'tasks', inputs.tasks, 'none selected: random tasks'),
       field('seed', 'seed', inputs.seed), field('topology', 'topology', inputs.topology, 'task: assigned; auto: the network\'s pick'),
       field('objective', 'objective', inputs.objective, 'who lifts, pulls, twists or presses once the grasp is ready'),
@@ -185,6 +199,7 @@ function submitForm(catalog, onQueued) {
     form.querySelectorAll('.field-error').forEach((n) => { n.textContent = ''; });
     form.querySelectorAll('.invalid').forEach((n) => n.classList.remove('invalid'));
     const body = { kind: kind.value };
+    if (inputs.world.value !== 'crm') body.world = inputs.world.value;
     const number = (name) => {
       const text = inputs[name].value.trim();
       if (text === '') return undefined;

@@ -75,6 +75,7 @@ export async function renderRun(main, idText) {
     header.replaceChildren(
       el('h1', {}, `Run #${run.id} `, el('small', {}, run.algorithm), ' ', badge(run.state)),
       el('dl', { class: 'facts' },
+        ...fact('world', spec.world || 'crm'),
         ...fact('tasks', tasksOf(run)), ...fact('topology', spec.topology || 'task'), ...fact('seed', spec.seed ?? 0),
         ...(run.state === 'running' && phaseOf(run) ? fact('phase', el('span', { id: 'phase' }, phaseText(phaseOf(run)))) : []),
         ...fact('steps', `${run.steps.toLocaleString()} of ${(spec.steps || 0).toLocaleString()} (${Math.round(100 * run.progress)}%)`),

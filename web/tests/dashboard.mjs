@@ -86,6 +86,8 @@ check('filters narrow the list', async () => {
 });
 
 check('the form shows API errors next to the field, then queues a job that appears', async () => {
+  // The form offers the coordinator's worlds (this one has only the built-in world).
+  assert.deepEqual(await page.$$eval('#f-world option', (os) => os.map((o) => o.value)), ['crm']);
   await page.fill('#f-steps', '-5');
   await page.click('#submit-job button[type=submit]');
   await page.waitForSelector('[data-error-for="steps"]:not(:empty)');
@@ -154,6 +156,7 @@ check('every page declares an icon that loads', async () => {
 check('a run page draws its curves, lists checkpoints and evaluations', async () => {
   await page.goto(`${base}/runs/${runA}`);
   await page.waitForSelector('h1:has-text("Run #")');
+  assert.match(await page.textContent('dl.facts'), /world\s*crm/);
   await chartsDrawn(9);
   // The per-task chart names the run's task (the training log's `task_success`).
   assert.match(await page.textContent('figure[data-metric="task_success"] svg'), /mouse-press/);

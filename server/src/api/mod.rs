@@ -106,8 +106,76 @@ async fn healthz(State(state): State<Arc<AppState>>) -> Response {
     }
 }
 
-async fn openapi() -> Response {
-    ([("content-type", "application/json")], OPENAPI).into_response()
+async fn openapi(State(state): State<Arc<AppState>>) -> Response {
+    (
+        [("content-type", "application/json")],
+        document(&state.worlds),
+    )
+        .into_response()
+}
+
+/// The OpenAPI document for these worlds: `world` names them and the task enums hold every
+/// world's task ids (the compiled-in document is the built-in world's).
+pub fn document(worlds: &[crm_api::worlds::WorldEntry]) -> String {
+    if worlds.len() <= 1 {
+        return OPENAPI.to_string();
+    }
+    let Ok(mut doc) = serde_json::from_str::<serde_json::Value>(OPENAPI) else {
+        return OPENAPI.to_string();
+    };
+    let names: Vec<serde_json::Value> = worlds.iter().map(|w| w.name.clone().into()).collect();
+    let mut ids: Vec<String> = Vec::new();
+    for task in worlds.iter().flat_map(|w| &w.catalog.tasks) {
+        if !ids.contains(&task.id) {
+            ids.push(task.id.clone());
+        }
+    }
+    widen(&mut doc, &names, &ids);
+    doc.to_string()
+}
+
+/// Sets every `world` property's enum to `names` and every task enum to `ids` (keeping a
+/// `null` the enum allowed).
+fn widen(value: &mut serde_json::Value, names: &[serde_json::Value], ids: &[String]) {
+    use serde_json::Value;
+    let with_ids = |old: &Value| -> Value {
+        let mut list: Vec<Value> = ids.iter().map(|id| Value::from(id.as_str())).collect();
+        if old.as_array().is_some_and(|a| a.contains(&Value::Null)) {
+            list.push(Value::Null);
+        }
+        Value::Array(list)
+    };
+    match value {
+        Value::Object(map) => {
+            if let Some(Value::Object(props)) = map.get_mut("properties") {
+                if let Some(world) = props.get_mut("world").and_then(Value::as_object_mut) {
+                    world.insert("enum".into(), Value::Array(names.to_vec()));
+                }
+                if let Some(task) = props.get_mut("task").and_then(Value::as_object_mut)
+                    && let Some(old) = task.get("enum").cloned()
+                {
+                    task.insert("enum".into(), with_ids(&old));
+                }
+                if let Some(items) = props
+                    .get_mut("tasks")
+                    .and_then(|t| t.get_mut("items"))
+                    .and_then(Value::as_object_mut)
+                    && let Some(old) = items.get("enum").cloned()
+                {
+                    items.insert("enum".into(), with_ids(&old));
+                }
+            }
+            for child in map.values_mut() {
+                widen(child, names, ids);
+            }
+        }
+        Value::Array(list) => {
+            for child in list {
+                widen(child, names, ids);
+            }
+        }
+        _ => {}
+    }
 }
 
 async fn not_found() -> ApiError {

@@ -224,8 +224,27 @@ pub async fn workers(State(state): State<Arc<AppState>>) -> Res {
     Ok(Json(json!({ "workers": workers })).into_response())
 }
 
-pub async fn tasks(State(state): State<Arc<AppState>>) -> Res {
-    Ok(Json(&*state.catalog).into_response())
+/// The catalog of the built-in world, or of `?world=NAME`.
+pub async fn tasks(
+    State(state): State<Arc<AppState>>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Res {
+    if let Some(key) = query.keys().find(|k| k.as_str() != "world") {
+        return Err(ApiError::invalid(key.clone(), "unknown query parameter"));
+    }
+    match query.get("world") {
+        None => Ok(Json(&*state.catalog).into_response()),
+        Some(name) => {
+            let world = state
+                .worlds
+                .iter()
+                .find(|w| &w.name == name)
+                .ok_or_else(|| {
+                    ApiError::not_found("world", format!("no world {name:?} (GET /api/v1/worlds)"))
+                })?;
+            Ok(Json(&world.catalog).into_response())
+        }
+    }
 }
 
 /// The worlds jobs may name: the built-in one and those under `--worlds`.

@@ -24,10 +24,16 @@ pub struct WorkerFlags {
 }
 
 impl WorkerFlags {
-    fn options(&self, coordinator: String, token: Option<String>) -> WorkerOptions {
+    fn options(
+        &self,
+        coordinator: String,
+        token: Option<String>,
+        worlds: Option<PathBuf>,
+    ) -> WorkerOptions {
         WorkerOptions {
             coordinator,
             token,
+            worlds,
             name: self.name.clone().unwrap_or_else(host_name),
             checkpoint_every_s: self.checkpoint_every_s,
             poll_s: self.poll_s.clamp(0.05, 60.0),
@@ -66,6 +72,10 @@ pub struct WorkerArgs {
     /// The coordinator's bearer token.
     #[arg(long, env = "CRM_TOKEN")]
     pub token: Option<String>,
+    /// A folder of world folders (each with a `world.json`) this worker can run besides the
+    /// built-in world: the coordinator's `--worlds`, as this machine sees it.
+    #[arg(long, value_name = "DIR")]
+    pub worlds: Option<PathBuf>,
     #[command(flatten)]
     pub worker: WorkerFlags,
 }
@@ -91,7 +101,9 @@ pub fn up(args: UpArgs) -> anyhow::Result<()> {
     let workers = args
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let options = args.worker.options(String::new(), config.token.clone());
+    let options = args
+        .worker
+        .options(String::new(), config.token.clone(), config.worlds.clone());
     up::up_main(config, workers, options)
 }
 
@@ -99,7 +111,10 @@ pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     if args.token.as_deref() == Some("") {
         anyhow::bail!("--token must not be empty");
     }
-    worker_main(args.worker.options(args.coordinator, args.token))
+    worker_main(
+        args.worker
+            .options(args.coordinator, args.token, args.worlds),
+    )
 }
 
 pub fn serve_policy(args: ServePolicyArgs) -> anyhow::Result<()> {

@@ -30,6 +30,8 @@ pub struct WorkerOptions {
     pub poll_s: f64,
     /// Environments per training job when the job does not say (default: one per core).
     pub envs: Option<usize>,
+    /// The folder of world folders this worker can run besides the built-in world.
+    pub worlds: Option<std::path::PathBuf>,
 }
 
 /// Leases and runs jobs until `stop` is set. Reconnects when the coordinator goes away.

@@ -115,7 +115,7 @@ pub async fn run_job(client: &Client, options: &WorkerOptions, job: pb::Job) -> 
     let options = options.clone();
     let outcome = tokio::task::spawn_blocking(move || match job.kind.as_str() {
         "train" => train(&link, &options, &job, &dir),
-        "eval" => eval(&link, &job, &dir),
+        "eval" => eval(&link, &options, &job, &dir),
         other => bail!("unknown job kind {other:?}"),
     })
     .await
@@ -161,12 +161,8 @@ fn train(
     // A training job reports the episodes it records with their transitions (the run page's
     // episode list); evaluations report every episode themselves.
     let recorder = recorder_for(spec.record.as_ref(), job.job_id, true);
-    let mut trainer = Trainer::new(
-        spec.clone(),
-        &EnvArgs::default(),
-        init.as_deref(),
-        recorder.clone(),
-    )?;
+    let env = env_for(spec.world.as_deref(), options)?;
+    let mut trainer = Trainer::new(spec.clone(), &env, init.as_deref(), recorder.clone())?;
     let resumed_from = trainer.steps();
     if resumed_from > 0 {
         tracing::info!(
@@ -182,7 +178,7 @@ fn train(
         let mut sent = Ok(());
         let finished = demos::imitate(
             &spec,
-            &EnvArgs::default(),
+            &env,
             &mut trainer,
             |line| {
                 tracing::info!(job = job.job_id, "{line}");
@@ -256,8 +252,14 @@ fn train(
     })))
 }
 
-fn eval(link: &Link, job: &pb::Job, dir: &Path) -> anyhow::Result<Option<serde_json::Value>> {
+fn eval(
+    link: &Link,
+    options: &WorkerOptions,
+    job: &pb::Job,
+    dir: &Path,
+) -> anyhow::Result<Option<serde_json::Value>> {
     let spec: EvalSpec = serde_json::from_str(&job.spec_json).context("the job's spec")?;
+    let env = env_for(spec.world.as_deref(), options)?;
     let path = dir.join("eval.safetensors");
     link.handle
         .block_on(link.client.download(job.checkpoint_id, &path))
@@ -268,7 +270,7 @@ fn eval(link: &Link, job: &pb::Job, dir: &Path) -> anyhow::Result<Option<serde_j
     let report = evaluate(
         &path,
         &spec,
-        &EnvArgs::default(),
+        &env,
         recorder.clone(),
         |done, total, record| {
             ship(link, job.job_id, recorder.as_ref());
@@ -300,6 +302,27 @@ fn eval(link: &Link, job: &pb::Job, dir: &Path) -> anyhow::Result<Option<serde_j
 }
 
 /// An episode's summary as the coordinator stores it.
+/// The environment options of a job's world: the built-in one, or the folder of that name
+/// under this worker's `--worlds`.
+fn env_for(world: Option<&str>, options: &WorkerOptions) -> anyhow::Result<EnvArgs> {
+    match world {
+        None => Ok(EnvArgs::default()),
+        Some(name) if name == crm_api::worlds::BUILTIN => Ok(EnvArgs::default()),
+        Some(name) => {
+            let found = crm_api::worlds::discover(options.worlds.as_deref())?
+                .into_iter()
+                .find(|w| w.name == name)
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "this worker has no world {name:?}: start it with --worlds naming the \
+                         folder that holds it"
+                    )
+                })?;
+            Ok(EnvArgs::default().in_world(found.dir))
+        }
+    }
+}
+
 fn summary(record: &EpisodeRecord) -> progress::Body {
     progress::Body::Episode(pb::EpisodeSummary {
         task: record.task.clone(),

@@ -119,6 +119,7 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
             checkpoint_every_s: 120,
             poll_s: 0.5,
             envs: None,
+            worlds: None,
         };
         let stop = stop.clone();
         runtime.spawn(async move {
