@@ -303,3 +303,65 @@ fn a_world_without_some_sensors_reads_them_as_zero() {
     assert_ne!(world.hash, World::builtin().hash);
     std::fs::remove_dir_all(root).ok();
 }
+
+/// The interpreter `scripts/test` installs gymnasium-robotics (assets only) and mujoco into.
+fn test_python() -> String {
+    std::env::var("CRM_TEST_PYTHON").unwrap_or_else(|_| {
+        panic!(
+            "CRM_TEST_PYTHON is not set: run scripts/test, which installs gymnasium-robotics \
+             1.4.2 and mujoco into its Python venv and points this variable at it"
+        )
+    })
+}
+
+fn python(code: &str) -> String {
+    let output = Command::new(test_python())
+        .args(["-c", code])
+        .output()
+        .expect("the test Python runs");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).trim().to_string()
+}
+
+/// gymnasium-robotics' `envs/assets` folder, found without importing the package.
+fn gymnasium_robotics_assets() -> PathBuf {
+    PathBuf::from(python(
+        "import importlib.util, os; \
+         spec = importlib.util.find_spec('gymnasium_robotics'); \
+         print(os.path.join(spec.submodule_search_locations[0], 'envs', 'assets'))",
+    ))
+}
+
+#[test]
+fn adroit_loads_with_mujocos_bodies_joints_and_couplings() {
+    use grasp_sim::hand::description::Description;
+    let assets = gymnasium_robotics_assets();
+    let file = assets.join("adroit_hand/adroit_relocate.xml");
+    let description = Description::load(&file, &Assets::default()).expect("Adroit loads");
+    let bodies = description.links.iter().filter(|l| !l.intermediate).count();
+    let joints = description.joints.iter().filter(|j| j.declared).count();
+    let counts = python(&format!(
+        "import mujoco; m = mujoco.MjModel.from_xml_path({:?}); print(m.nbody, m.njnt)",
+        file.display().to_string()
+    ));
+    assert_eq!(format!("{bodies} {joints}"), counts, "(bodies, joints) against MuJoCo");
+    // T_FFJ1c couples the index DIP to its PIP: 0.00705 FFJ0 - 0.00805 FFJ1 = 0.
+    let dip = &description.joints[description.joint("FFJ0").expect("FFJ0")];
+    let mimic = dip.mimic.as_ref().expect("the tendon's coupling");
+    assert_eq!(mimic.leader, "FFJ1");
+    assert!((mimic.ratio - 0.00805 / 0.00705).abs() < 1e-5, "{mimic:?}");
+
+    let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/adroit");
+    let world = World::load_with(&world, &Assets::parse(&assets.display().to_string()))
+        .expect("worlds/adroit");
+    // The arm (slides, rotations) and the wrist joints are dropped; our wrist holds the palm.
+    assert_eq!(world.benchmark.hand.revolute_joints(), 22);
+    let angles = index_angles(&world, "mug-wrap", 0.6);
+    for (got, want) in &angles {
+        assert!((got - want).abs() < 0.05, "Adroit joint angles {angles:?}");
+    }
+}

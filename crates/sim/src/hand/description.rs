@@ -69,6 +69,8 @@ pub struct Joint {
     pub mimic: Option<Mimic>,
     /// Whether the description declares it (loaders add unnamed fixed joints of their own).
     pub declared: bool,
+    /// Reflected rotor inertia (kg m², MJCF `armature`; 0 where the description has none).
+    pub armature: f32,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -144,6 +146,7 @@ impl Description {
             let name = joint.name.clone().unwrap_or_else(|| format!("joint{i}"));
             let mut converted = convert_joint(name, joint.link1, joint.link2, &joint.joint);
             converted.declared = joint.name.is_some();
+            converted.armature = joint.armature_per_dof;
             joints.push(converted);
         }
         for tendon in &model.tendons {
@@ -303,6 +306,7 @@ fn convert_joint(name: String, parent: usize, child: usize, joint: &GenericJoint
         limits,
         mimic: None,
         declared: true,
+        armature: 0.0,
     }
 }
 

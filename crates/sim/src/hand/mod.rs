@@ -124,19 +124,24 @@ impl Hand {
         let mut joints = Vec::with_capacity(model.joints.len());
         for (i, (link, pose)) in model.links.iter().zip(&poses).enumerate() {
             let mut builder = RigidBodyBuilder::dynamic().pose(*pose).gravity_scale(0.0);
+            // The rotor inertia of the joint that moves this link (MuJoCo's armature), on
+            // every axis: impulse joints have no joint-space inertia of their own.
+            let armature = if i > 0 { model.joints[i - 1].armature } else { 0.0 };
             if link.shapes.is_empty() {
                 // A link without shapes (a knuckle between two joints) still needs mass and
                 // inertia, or the solver holds it as immovable: a 1 cm sphere of its mass.
-                let mass = if link.mass > 0.0 {
-                    link.mass
-                } else {
-                    SHAPELESS_MASS
-                };
-                let inertia = 0.4 * mass * 0.01 * 0.01;
+                let mass = if link.mass > 0.0 { link.mass } else { SHAPELESS_MASS };
+                let inertia = 0.4 * mass * 0.01 * 0.01 + armature;
                 builder = builder.additional_mass_properties(MassProperties::new(
                     Vec3::ZERO,
                     mass,
                     Vec3::splat(inertia),
+                ));
+            } else if armature > 0.0 {
+                builder = builder.additional_mass_properties(MassProperties::new(
+                    Vec3::ZERO,
+                    0.0,
+                    Vec3::splat(armature),
                 ));
             }
             let body = world.insert_body(builder);
@@ -252,6 +257,12 @@ impl Hand {
         let frame1 = pose(model.parent) * model.frame1;
         let frame2 = pose(model.child) * model.frame2;
         let (axis, angle) = (frame1.rotation.inverse() * frame2.rotation).to_axis_angle();
+        // `to_axis_angle` gives [0, 2 pi): a small negative turn comes as nearly 2 pi.
+        let angle = if angle > std::f32::consts::PI {
+            angle - std::f32::consts::TAU
+        } else {
+            angle
+        };
         angle * axis.x.signum()
     }
 

@@ -33,6 +33,9 @@ pub struct ModelJoint {
     pub limits: Option<[f32; 2]>,
     /// Motor torque limit (N m).
     pub torque: f32,
+    /// Rotor inertia (kg m²) the child link carries: the description's `armature`, or the
+    /// profile's `motor.armature` where it gives one.
+    pub armature: f32,
 }
 
 /// One of the paper's five finger actions on this hand.
@@ -119,6 +122,7 @@ impl HandModel {
                     frame2: joint.frame2,
                     limits: joint.limits,
                     torque: profile.motor.torque,
+                    armature: profile.motor.armature.unwrap_or(joint.armature),
                 }
             })
             .collect();
@@ -144,6 +148,7 @@ impl HandModel {
             (profile.motor.stiffness, "motor.stiffness"),
             (profile.motor.damping, "motor.damping"),
             (profile.motor.torque, "motor.torque"),
+            (profile.motor.armature.unwrap_or(0.0), "motor.armature"),
         ] {
             if !(value.is_finite() && value >= 0.0) {
                 return Err(invalid(

@@ -65,6 +65,10 @@ pub struct Motor {
     pub damping: f32,
     /// N m: the torque limit of a joint that names none.
     pub torque: f32,
+    /// kg m²: rotor inertia added to each moving link (default: the description's
+    /// `armature` per joint, MuJoCo's way of keeping light links stable; 0 where none).
+    #[serde(default)]
+    pub armature: Option<f32>,
 }
 
 /// The paper's five finger actions, thumb first.
