@@ -20,7 +20,7 @@ from .env import (
     REWARD_MODES,
     STAGES,
     TASKS,
-    WORLDS,
+    BUILTIN,
     CrmGraspEnv,
     CrmGraspVectorEnv,
 )
@@ -33,7 +33,7 @@ __all__ = [
     "REWARD_MODES",
     "STAGES",
     "TASKS",
-    "WORLDS",
+    "BUILTIN",
     "CrmGraspEnv",
     "CrmGraspVectorEnv",
     "register_envs",

@@ -12,6 +12,7 @@ episode's end its `outcome` (`success`, `failure (dropped)`, ...).
 
 from __future__ import annotations
 
+import os
 from typing import Any, Sequence
 
 import gymnasium as gym
@@ -27,17 +28,22 @@ STAGES: tuple[str, ...] = tuple(_native.STAGES)
 TASKS: tuple[str, ...] = tuple(_native.TASKS)
 ENV_VERSION: str = _native.ENV_VERSION
 
-WORLDS = ("builtin",)
+BUILTIN = "builtin"
 REWARD_MODES = ("crm", "dense", "sparse")
 OBJECTIVES = ("scripted", "learned")
 
 _MAX_SEED = 2**64 - 1
 
 
-def _tasks(task: str | Sequence[str] | None) -> list[str]:
+def _tasks(task: str | Sequence[str] | None, world: str | None) -> list[str]:
     if task is None:
         return []
     names = [task] if isinstance(task, str) else list(task)
+    if world is not None:
+        # Another world's tasks are checked by the native side, which knows them.
+        if not all(isinstance(name, str) for name in names):
+            raise ValueError(f"task: task ids are strings, got {names!r}")
+        return names
     for name in names:
         if not isinstance(name, str) or name not in TASKS:
             raise ValueError(
@@ -46,15 +52,29 @@ def _tasks(task: str | Sequence[str] | None) -> list[str]:
     return names
 
 
+def _world_dir(world: str | os.PathLike) -> str | None:
+    """None for the built-in world, else the folder holding `world.json`."""
+    if isinstance(world, str) and world == BUILTIN:
+        return None
+    if not isinstance(world, (str, os.PathLike)):
+        raise ValueError(f"world: {world!r} is neither \"builtin\" nor a folder")
+    path = os.fspath(world)
+    if not os.path.isfile(os.path.join(path, "world.json")):
+        raise ValueError(
+            f"world: {path!r} is neither \"builtin\" nor a folder with a world.json "
+            "(docs/WORLDS.md)"
+        )
+    return path
+
+
 def _native_batch(num_envs, task, world, objective, randomize, reward_mode, hold_s):
-    if world not in WORLDS:
-        raise ValueError(f"world: unknown world {world!r} (this build knows {WORLDS})")
+    folder = _world_dir(world)
     if objective not in OBJECTIVES:
         raise ValueError(f"objective: {objective!r} is not one of {OBJECTIVES}")
     if reward_mode not in REWARD_MODES:
         raise ValueError(f"reward_mode: {reward_mode!r} is not one of {REWARD_MODES}")
     return _native.NativeBatch(
-        num_envs, _tasks(task), objective, bool(randomize), reward_mode, hold_s
+        num_envs, _tasks(task, folder), objective, bool(randomize), reward_mode, hold_s, folder
     )
 
 
@@ -81,7 +101,8 @@ class CrmGraspEnv(gym.Env):
     Args:
         task: a task id (`crm_grasp.TASKS`), a list of them (drawn with each episode's seed)
             or None for the whole benchmark.
-        world: "builtin", the benchmark's world.
+        world: "builtin" (the benchmark's world) or a world folder (`world.json`: your hand
+            and objects, docs/WORLDS.md; files found beside it or in `CRM_ASSETS`).
         objective: "scripted" (the paper's protocol: once the grasp is ready the arm executes
             the objective by script within that step) or "learned" (the policy executes it).
         randomize: the paper's domain randomization.
@@ -97,7 +118,7 @@ class CrmGraspEnv(gym.Env):
     def __init__(
         self,
         task: str | Sequence[str] | None = None,
-        world: str = "builtin",
+        world: str | os.PathLike = BUILTIN,
         objective: str = "scripted",
         randomize: bool = True,
         reward_mode: str = "crm",
@@ -166,7 +187,7 @@ class CrmGraspVectorEnv(VectorEnv):
         self,
         num_envs: int = 1,
         task: str | Sequence[str] | None = None,
-        world: str = "builtin",
+        world: str | os.PathLike = BUILTIN,
         objective: str = "scripted",
         randomize: bool = True,
         reward_mode: str = "crm",

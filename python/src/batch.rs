@@ -4,15 +4,15 @@
 //! An environment's step is the Rust one (`crm::CrmEnv<GraspEnv>`), so an episode from Python
 //! is the episode `crm replay` prints, bit for bit (python/tests).
 
-use std::sync::Arc;
-
 use crm::{CrmEnv, EnvStep, Environment, Machine, RewardMode, StageId};
-use grasp_sim::{Benchmark, GraspEnv, Protocol, SimConfig, TaskChoice};
+use grasp_sim::{GraspEnv, Protocol, SimConfig, TaskChoice, World};
 use rayon::prelude::*;
 
 /// What every environment of a batch is made with (the Python constructor's arguments).
 #[derive(Clone, Debug)]
 pub struct Options {
+    /// A world folder (`world.json`); the built-in world when absent.
+    pub world: Option<std::path::PathBuf>,
     /// Task ids to draw from (uniformly, with each episode's seed); all tasks when empty.
     pub tasks: Vec<String>,
     pub protocol: Protocol,
@@ -102,9 +102,13 @@ fn episode_seed(seed: u64, episode: u64) -> u64 {
 }
 
 impl Batch {
-    /// `count` environments of the built-in world; an unknown task id is an error naming it.
+    /// `count` environments of the options' world; an unknown task id is an error naming it.
     pub fn new(count: usize, options: &Options) -> Result<Self, String> {
-        let benchmark = Arc::new(Benchmark::builtin());
+        let world = match &options.world {
+            Some(dir) => World::load(dir).map_err(|e| format!("world: {e}"))?,
+            None => World::builtin(),
+        };
+        let benchmark = world.benchmark.clone();
         let choice = if options.tasks.is_empty() {
             TaskChoice::Random
         } else {
@@ -115,7 +119,16 @@ impl Batch {
                     .iter()
                     .position(|t| &t.id == id)
                     .ok_or_else(|| {
-                        format!("task: unknown task {id:?} (crm_grasp.TASKS lists the benchmark's)")
+                        format!(
+                            "task: unknown task {id:?} (the world {:?} has {})",
+                            world.name,
+                            benchmark
+                                .tasks
+                                .iter()
+                                .map(|t| t.id.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )
                     })?;
                 indices.push(index);
             }
@@ -126,7 +139,11 @@ impl Batch {
             }
         };
         let mut config = if options.randomize {
-            SimConfig::default()
+            let mut config = SimConfig::default();
+            if let Some(randomization) = &world.randomization {
+                config.randomization = randomization.clone();
+            }
+            config
         } else {
             SimConfig::deterministic()
         };
@@ -134,7 +151,10 @@ impl Batch {
         if let Some(hold) = options.hold_s {
             config.hold_s = hold;
         }
-        let machine = grasp_sim::spec::grasping_machine();
+        let machine = match &world.spec {
+            Some(spec) => Machine::from_spec(spec.clone()).map_err(|e| format!("world: {e}"))?,
+            None => grasp_sim::spec::grasping_machine(),
+        };
         let slots = (0..count)
             .map(|_| {
                 let mut inner = GraspEnv::new(benchmark.clone(), config.clone());

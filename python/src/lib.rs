@@ -75,7 +75,7 @@ impl NativeBatch {
     /// grasp is ready) or "learned"; `reward_mode`: "crm", "dense" (intra-stage rewards
     /// only, LPPO) or "sparse" (transition rewards only, IPPO).
     #[new]
-    #[pyo3(signature = (num_envs, tasks, objective, randomize, reward_mode, hold_s=None))]
+    #[pyo3(signature = (num_envs, tasks, objective, randomize, reward_mode, hold_s=None, world=None))]
     fn new(
         num_envs: usize,
         tasks: Vec<String>,
@@ -83,6 +83,7 @@ impl NativeBatch {
         randomize: bool,
         reward_mode: &str,
         hold_s: Option<f32>,
+        world: Option<std::path::PathBuf>,
     ) -> PyResult<Self> {
         if num_envs == 0 {
             return Err(value_error("num_envs: at least 1"));
@@ -114,6 +115,7 @@ impl NativeBatch {
             )));
         }
         let options = Options {
+            world,
             tasks,
             protocol,
             randomize,

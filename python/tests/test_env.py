@@ -3,6 +3,7 @@
 import json
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -184,6 +185,28 @@ def test_a_bad_action_is_refused_and_changes_nothing(bad):
     twins.reset(seed=9)
     both = np.stack([good, good])
     assert envs.step(both)[0].tobytes() == twins.step(both)[0].tobytes()
+
+
+def test_a_world_folder_runs_with_its_hand_tasks_and_sensors(tmp_path, monkeypatch):
+    subprocess.run([sys.executable, str(ROOT / "scripts" / "make-test-world"), str(tmp_path)], check=True)
+    monkeypatch.setenv("CRM_ASSETS", str(tmp_path / "assets"))
+    env = gym.make("CrmGrasp-v0", world=tmp_path / "world", task="blocks-lift")
+    obs, info = env.reset(seed=0)
+    assert info["task"] == "blocks-lift"
+    force = [crm_grasp.FEATURES.index(f) for f in ("force_x", "force_y", "force_z", "cone")]
+    for _ in range(40):
+        obs, _, terminated, truncated, info = env.step(np.array([0, 0, -1, 0, 0, 0, 0, 0], np.float32))
+        # This robot senses no contact force (its world.json: sensors.without).
+        assert not obs[force].any()
+        if terminated or truncated:
+            break
+    with pytest.raises(ValueError, match="^task:.*mouse-press"):
+        gym.make("CrmGrasp-v0", world=tmp_path / "world", task="mouse-press")
+    (tmp_path / "world" / "hand.json").write_text(
+        (tmp_path / "world" / "hand.json").read_text().replace('"thumb_ip"', '"thumb_tip"', 1)
+    )
+    with pytest.raises(ValueError, match="^world:.*hand.json.*fingers.thumb.joints"):
+        gym.make("CrmGrasp-v0", world=tmp_path / "world")
 
 
 def test_the_readme_example_runs():

@@ -134,7 +134,18 @@ fn a_world_folder_round_trip_and_a_checkpoint_from_another_hand_refused() {
     );
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("mug-wrap"), "{stdout}");
-    assert!(std::fs::metadata(&recording).expect("rrd").len() > 1000);
+    let recording = recording.to_str().expect("utf-8");
+    let (code, stdout, stderr) = crm(&root, &["record", "--inspect", recording]);
+    assert_eq!(code, 0, "{stderr}");
+    let summary: serde_json::Value = serde_json::from_str(&stdout).expect("inspect JSON");
+    // The mesh object (VHACD's hulls) and the URDF hand's mesh links are drawn as meshes.
+    for entity in ["/world/object/part_0", "/world/hand/palm"] {
+        let archetypes = &summary["entities"][entity]["archetypes"];
+        assert!(
+            archetypes.to_string().contains("Mesh3D"),
+            "{entity}: {archetypes}"
+        );
+    }
 
     // The same checkpoint in the built-in world, and the shipped model in this one: refused.
     let (code, _, stderr) = crm(

@@ -29,8 +29,8 @@ pub enum PartShape {
     /// Convex pieces (a mesh object's hulls, a description's convex mesh links) as one
     /// triangle mesh in the collider's frame.
     Mesh {
-        vertices: Vec<[f32; 3]>,
-        triangles: Vec<[u32; 3]>,
+        vertices: std::sync::Arc<[[f32; 3]]>,
+        triangles: std::sync::Arc<[[u32; 3]]>,
     },
     /// A shape the view does not draw.
     Other,
@@ -44,6 +44,9 @@ pub struct Part {
     pub shape: PartShape,
     pub translation: [f32; 3],
     pub rotation: [f32; 4],
+    /// Whether a viewer draws it: a collider of a link whose description has a visual mesh
+    /// is listed but not drawn (the visual mesh is, as its own part).
+    pub drawn: bool,
 }
 
 /// One hand-object contact point: where, and the force on the object (newtons).
@@ -97,15 +100,17 @@ fn shape_of(shape: &dyn rapier3d::parry::shape::Shape) -> PartShape {
             PartShape::Other
         } else {
             PartShape::Mesh {
-                vertices,
-                triangles,
+                vertices: vertices.into(),
+                triangles: triangles.into(),
             }
         }
     }
 }
 
 impl GraspEnv {
-    /// Every collider of the current scene, named by what it belongs to; empty before reset.
+    /// Every collider of the current scene, named by what it belongs to (a second collider of
+    /// one body gets `_1`, ...), then the hand's visual meshes (`hand/LINK/visual_K`); empty
+    /// before reset.
     pub fn parts(&self) -> Vec<Part> {
         let Some(scene) = self.scene() else {
             return Vec::new();
@@ -127,13 +132,45 @@ impl GraspEnv {
                     (None, None) => "other".to_string(),
                 },
             };
+            let repeats = parts
+                .iter()
+                .filter(|p: &&Part| p.name == name || p.name.starts_with(&format!("{name}_")))
+                .count();
+            let name = if repeats == 0 {
+                name
+            } else {
+                format!("{name}_{repeats}")
+            };
+            let drawn = collider
+                .parent()
+                .and_then(|body| hand.bodies.iter().position(|&b| b == body))
+                .is_none_or(|i| hand.model.links[i].visuals.is_empty());
             let pose = collider.position();
             parts.push(Part {
                 name,
                 shape: shape_of(collider.shape()),
                 translation: pose.translation.into(),
                 rotation: pose.rotation.to_array(),
+                drawn,
             });
+        }
+        for (link, &body) in hand.model.links.iter().zip(&hand.bodies) {
+            let Some(body) = scene.world.bodies.get(body) else {
+                continue;
+            };
+            for (k, visual) in link.visuals.iter().enumerate() {
+                let pose = body.position() * visual.pose;
+                parts.push(Part {
+                    name: format!("hand/{}/visual_{k}", link.name),
+                    shape: PartShape::Mesh {
+                        vertices: visual.vertices.clone(),
+                        triangles: visual.triangles.clone(),
+                    },
+                    translation: pose.translation.into(),
+                    rotation: pose.rotation.to_array(),
+                    drawn: true,
+                });
+            }
         }
         parts
     }

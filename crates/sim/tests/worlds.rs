@@ -348,7 +348,11 @@ fn adroit_loads_with_mujocos_bodies_joints_and_couplings() {
         "import mujoco; m = mujoco.MjModel.from_xml_path({:?}); print(m.nbody, m.njnt)",
         file.display().to_string()
     ));
-    assert_eq!(format!("{bodies} {joints}"), counts, "(bodies, joints) against MuJoCo");
+    assert_eq!(
+        format!("{bodies} {joints}"),
+        counts,
+        "(bodies, joints) against MuJoCo"
+    );
     // T_FFJ1c couples the index DIP to its PIP: 0.00705 FFJ0 - 0.00805 FFJ1 = 0.
     let dip = &description.joints[description.joint("FFJ0").expect("FFJ0")];
     let mimic = dip.mimic.as_ref().expect("the tendon's coupling");

@@ -17,6 +17,8 @@ use serde::Serialize;
 pub struct EntitySummary {
     pub rows: usize,
     pub timelines: BTreeSet<String>,
+    /// The archetypes logged to it (`rerun.archetypes.Mesh3D`, ...).
+    pub archetypes: BTreeSet<String>,
 }
 
 /// What a recording file holds.
@@ -86,6 +88,11 @@ pub fn summarize(path: &Path) -> anyhow::Result<Summary> {
         entry
             .timelines
             .extend(chunk.timelines().keys().map(|t| t.to_string()));
+        entry.archetypes.extend(
+            chunk
+                .component_descriptors()
+                .filter_map(|d| d.archetype.map(|a| a.to_string())),
+        );
     }
     Ok(summary)
 }

@@ -58,7 +58,7 @@ fn path(part: &Part) -> String {
 /// Shapes once per episode, static (and the table's pose: it never moves).
 pub fn log_shapes(rec: &RecordingStream, parts: &[Part]) -> RecordingStreamResult<()> {
     rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
-    for part in parts {
+    for part in parts.iter().filter(|p| p.drawn) {
         let c = color(&part.name);
         let path = path(part);
         if part.name == "table" {
@@ -119,7 +119,7 @@ fn transform(part: &Part) -> rerun::Transform3D {
 /// The pose of every part that moves (all but the table, logged once with its shape) at the
 /// current time.
 pub fn log_poses(rec: &RecordingStream, parts: &[Part]) -> RecordingStreamResult<()> {
-    for part in parts.iter().filter(|p| p.name != "table") {
+    for part in parts.iter().filter(|p| p.drawn && p.name != "table") {
         rec.log(path(part), &transform(part))?;
     }
     Ok(())

@@ -37,6 +37,39 @@ pub struct Link {
     pub shapes: Vec<(Pose, SharedShape)>,
     /// kg; 0 when the description gives none.
     pub mass: f32,
+    /// What the description draws (meshes, in the link frame), for viewers.
+    pub visuals: Vec<VisualMesh>,
+}
+
+/// A triangle mesh to draw, placed in its link's frame.
+#[derive(Clone, Debug)]
+pub struct VisualMesh {
+    pub pose: Pose,
+    pub vertices: std::sync::Arc<[[f32; 3]]>,
+    pub triangles: std::sync::Arc<[[u32; 3]]>,
+}
+
+impl VisualMesh {
+    /// A drawable mesh of `shape` (a triangle mesh or a convex hull), if it is one.
+    pub fn of(pose: Pose, shape: &SharedShape) -> Option<Self> {
+        let (vertices, triangles): (Vec<[f32; 3]>, Vec<[u32; 3]>) =
+            if let Some(mesh) = shape.as_trimesh() {
+                (
+                    mesh.vertices().iter().map(|v| v.to_array()).collect(),
+                    mesh.indices().to_vec(),
+                )
+            } else if let Some(hull) = shape.as_convex_polyhedron() {
+                let (points, faces) = hull.to_trimesh();
+                (points.iter().map(|v| v.to_array()).collect(), faces)
+            } else {
+                return None;
+            };
+        Some(Self {
+            pose,
+            vertices: vertices.into(),
+            triangles: triangles.into(),
+        })
+    }
 }
 
 /// What a joint lets move.
@@ -136,6 +169,11 @@ impl Description {
             .map(|(i, body)| Link {
                 name: body.name.clone().unwrap_or_else(|| format!("body{i}")),
                 intermediate: body.is_intermediate,
+                visuals: body
+                    .visual_meshes
+                    .iter()
+                    .filter_map(|v| VisualMesh::of(v.local_pose, &v.shape))
+                    .collect(),
                 rest: *body.body.position(),
                 shapes: shapes_of(&body.colliders),
                 mass: body.mass,
@@ -217,6 +255,14 @@ impl Description {
             ..UrdfLoaderOptions::default()
         };
         let loaded = UrdfRobot::from_robot(&robot, options, Path::new("/"));
+        // The visual geometry, loaded as triangle meshes, for viewers only.
+        let visual_options = UrdfLoaderOptions {
+            create_colliders_from_collision_shapes: false,
+            create_colliders_from_visual_shapes: true,
+            mesh_converter: Some(MeshConverter::TriMesh),
+            ..UrdfLoaderOptions::default()
+        };
+        let visuals = UrdfRobot::from_robot(&robot, visual_options, Path::new("/"));
         let mut links = Vec::new();
         for link in &loaded.links {
             let source = &robot.links[link.urdf_link_index];
@@ -234,9 +280,28 @@ impl Description {
                     "the mesh could not be read (empty, or not STL, OBJ or Collada)",
                 ));
             }
+            let drawn = visuals
+                .links
+                .iter()
+                .find(|v| v.urdf_link_index == link.urdf_link_index)
+                .map(|v| {
+                    v.colliders
+                        .iter()
+                        .filter_map(|c| {
+                            let collider = &c.collider;
+                            let pose = collider
+                                .position_wrt_parent()
+                                .copied()
+                                .unwrap_or(*collider.position());
+                            VisualMesh::of(pose, collider.shared_shape())
+                        })
+                        .collect()
+                })
+                .unwrap_or_default();
             links.push(Link {
                 name: source.name.clone(),
                 intermediate: false,
+                visuals: drawn,
                 rest: *link.body.position(),
                 shapes: shapes_of(&colliders),
                 mass: source.inertial.mass.value as f32,

@@ -126,11 +126,19 @@ impl Hand {
             let mut builder = RigidBodyBuilder::dynamic().pose(*pose).gravity_scale(0.0);
             // The rotor inertia of the joint that moves this link (MuJoCo's armature), on
             // every axis: impulse joints have no joint-space inertia of their own.
-            let armature = if i > 0 { model.joints[i - 1].armature } else { 0.0 };
+            let armature = if i > 0 {
+                model.joints[i - 1].armature
+            } else {
+                0.0
+            };
             if link.shapes.is_empty() {
                 // A link without shapes (a knuckle between two joints) still needs mass and
                 // inertia, or the solver holds it as immovable: a 1 cm sphere of its mass.
-                let mass = if link.mass > 0.0 { link.mass } else { SHAPELESS_MASS };
+                let mass = if link.mass > 0.0 {
+                    link.mass
+                } else {
+                    SHAPELESS_MASS
+                };
                 let inertia = 0.4 * mass * 0.01 * 0.01 + armature;
                 builder = builder.additional_mass_properties(MassProperties::new(
                     Vec3::ZERO,

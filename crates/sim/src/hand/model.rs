@@ -19,6 +19,8 @@ pub struct ModelLink {
     pub rest: Pose,
     pub shapes: Vec<(Pose, SharedShape)>,
     pub mass: f32,
+    /// The description's visual meshes (viewers draw them instead of the shapes).
+    pub visuals: Vec<super::description::VisualMesh>,
 }
 
 /// A joint of the hand, parent before child (indices into [`HandModel::links`]).
@@ -104,6 +106,7 @@ impl HandModel {
                     rest: palm_rest.inverse() * link.rest,
                     shapes: link.shapes.clone(),
                     mass: link.mass,
+                    visuals: link.visuals.clone(),
                 }
             })
             .collect();
@@ -350,7 +353,7 @@ impl HandModel {
         self.fingers[finger].range[1]
     }
 
-    /// The joints that move, by name (revolute).
+    /// How many joints move (revolute ones).
     pub fn revolute_joints(&self) -> usize {
         self.joints
             .iter()
