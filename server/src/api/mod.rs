@@ -134,22 +134,24 @@ pub fn document(worlds: &[crm_api::worlds::WorldEntry]) -> String {
     doc.to_string()
 }
 
-/// Sets every `world` property's enum to `names` and every task enum to `ids` (keeping a
-/// `null` the enum allowed).
+/// Sets every `world` property's enum to `names` and every task enum to `ids` (each keeping
+/// the `null` its enum allowed: absent and null mean the built-in world, or random tasks).
 fn widen(value: &mut serde_json::Value, names: &[serde_json::Value], ids: &[String]) {
     use serde_json::Value;
-    let with_ids = |old: &Value| -> Value {
-        let mut list: Vec<Value> = ids.iter().map(|id| Value::from(id.as_str())).collect();
+    let keeping_null = |old: &Value, mut list: Vec<Value>| -> Value {
         if old.as_array().is_some_and(|a| a.contains(&Value::Null)) {
             list.push(Value::Null);
         }
         Value::Array(list)
     };
+    let with_ids =
+        |old: &Value| keeping_null(old, ids.iter().map(|id| Value::from(id.as_str())).collect());
     match value {
         Value::Object(map) => {
             if let Some(Value::Object(props)) = map.get_mut("properties") {
                 if let Some(world) = props.get_mut("world").and_then(Value::as_object_mut) {
-                    world.insert("enum".into(), Value::Array(names.to_vec()));
+                    let old = world.get("enum").cloned().unwrap_or(Value::Null);
+                    world.insert("enum".into(), keeping_null(&old, names.to_vec()));
                 }
                 if let Some(task) = props.get_mut("task").and_then(Value::as_object_mut)
                     && let Some(old) = task.get("enum").cloned()
