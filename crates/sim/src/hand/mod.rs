@@ -10,6 +10,8 @@
 
 pub mod builtin;
 pub mod description;
+mod finger;
+mod includes;
 pub mod model;
 pub mod profile;
 
