@@ -55,6 +55,27 @@ pub enum Error {
 /// The crate's result alias.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+/// A data file's text, or [`Error::Io`] naming it.
+pub(crate) fn read_text(path: &std::path::Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// [`Error::Invalid`] for the file `path` at `at`.
+pub(crate) fn invalid_at(
+    path: &std::path::Path,
+    at: impl Into<String>,
+    message: impl Into<String>,
+) -> Error {
+    Error::Invalid {
+        path: path.display().to_string(),
+        at: at.into(),
+        message: message.into(),
+    }
+}
+
 pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, path: &str) -> Result<T> {
     serde_json::from_str(text).map_err(|err| Error::Parse {
         path: path.to_string(),

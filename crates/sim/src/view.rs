@@ -118,6 +118,8 @@ impl GraspEnv {
         let hand = &scene.hand;
         let mut object_parts = 0;
         let mut parts = Vec::new();
+        // How often each name was given, for the `_1`, `_2` of a body's further colliders.
+        let mut names = std::collections::HashMap::new();
         for (_, collider) in scene.world.colliders.iter() {
             let name = match collider.parent() {
                 None => "table".to_string(),
@@ -132,15 +134,13 @@ impl GraspEnv {
                     (None, None) => "other".to_string(),
                 },
             };
-            let repeats = parts
-                .iter()
-                .filter(|p: &&Part| p.name == name || p.name.starts_with(&format!("{name}_")))
-                .count();
-            let name = if repeats == 0 {
+            let seen = names.entry(name.clone()).or_insert(0);
+            let name = if *seen == 0 {
                 name
             } else {
-                format!("{name}_{repeats}")
+                format!("{name}_{seen}")
             };
+            *seen += 1;
             let drawn = collider
                 .parent()
                 .and_then(|body| hand.bodies.iter().position(|&b| b == body))

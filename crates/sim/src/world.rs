@@ -18,7 +18,7 @@ use sha2::{Digest, Sha256};
 use crate::assets::Assets;
 use crate::benchmark::{Benchmark, SharedHand};
 use crate::config::Randomization;
-use crate::error::{Error, Result, parse_json};
+use crate::error::{Error, Result, parse_json, read_text};
 use crate::hand::HandModel;
 use crate::hand::description::{Description, Source};
 use crate::hand::profile::Profile;
@@ -99,13 +99,6 @@ pub struct World {
     pub hash: String,
 }
 
-fn io(path: &Path, source: std::io::Error) -> Error {
-    Error::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
 impl World {
     /// The built-in world, `worlds/crm/`, compiled in.
     pub fn builtin() -> Self {
@@ -135,7 +128,7 @@ impl World {
     pub fn load_with(dir: &Path, assets: &Assets) -> Result<Self> {
         let path = dir.join("world.json");
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(&path).map_err(|source| io(&path, source))?;
+        let text = read_text(&path)?;
         let file: WorldFile = parse_json(&text, &origin)?;
         let invalid = |at: &str, message: String| Error::Invalid {
             path: origin.clone(),
@@ -169,8 +162,7 @@ impl World {
             })
         };
         let profile_path = find("hand", &file.hand)?;
-        let profile_text =
-            std::fs::read_to_string(&profile_path).map_err(|source| io(&profile_path, source))?;
+        let profile_text = read_text(&profile_path)?;
         let profile: Profile = parse_json(&profile_text, &profile_path.display().to_string())?;
         let profile_dir = profile_path.parent().unwrap_or(dir);
         let description_path = assets

@@ -13,7 +13,7 @@ use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, invalid_at};
 
 /// VHACD's parameters for a non-convex mesh (defaults: parry's, with at most 32 hulls).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -81,11 +81,7 @@ struct RawMesh {
 }
 
 fn bad(path: &Path, message: impl Into<String>) -> Error {
-    Error::Invalid {
-        path: path.display().to_string(),
-        at: "mesh".into(),
-        message: message.into(),
-    }
+    invalid_at(path, "mesh", message)
 }
 
 fn read_obj(path: &Path, text: &str) -> Result<RawMesh> {

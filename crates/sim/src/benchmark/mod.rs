@@ -17,7 +17,7 @@ pub use task::{GraspLocation, Task};
 pub use taxonomy::{FINGERS, FingerShape, Fragility, Objective, Topology};
 
 use crate::assets::Assets;
-use crate::error::{Error, Result, parse_json};
+use crate::error::{Error, Result, parse_json, read_text};
 use crate::hand::HandModel;
 
 const BUILTIN: &str = include_str!("../../../../worlds/crm/benchmark.json");
@@ -77,10 +77,7 @@ impl Benchmark {
 
     /// [`Benchmark::load`] with the asset folders given.
     pub fn load_with(path: &Path, assets: &Assets) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        let text = read_text(path)?;
         let base = path.parent().unwrap_or(Path::new("."));
         Self::from_json_in(&text, &path.display().to_string(), base, assets)
     }

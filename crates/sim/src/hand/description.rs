@@ -17,7 +17,7 @@ use rapier3d_urdf::{UrdfLoaderOptions, UrdfRobot, urdf_rs};
 
 use super::includes::expand_includes;
 use crate::assets::Assets;
-use crate::error::{Error, Result};
+use crate::error::{Result, invalid_at as invalid, read_text as read};
 
 /// Which format a description came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -120,21 +120,6 @@ pub struct Description {
     pub source: Source,
     pub links: Vec<Link>,
     pub joints: Vec<Joint>,
-}
-
-fn invalid(path: &Path, at: impl Into<String>, message: impl Into<String>) -> Error {
-    Error::Invalid {
-        path: path.display().to_string(),
-        at: at.into(),
-        message: message.into(),
-    }
-}
-
-fn read(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    })
 }
 
 impl Description {

@@ -5,22 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, Result};
-
-fn invalid(path: &Path, at: impl Into<String>, message: impl Into<String>) -> Error {
-    Error::Invalid {
-        path: path.display().to_string(),
-        at: at.into(),
-        message: message.into(),
-    }
-}
-
-fn read(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.display().to_string(),
-        source,
-    })
-}
+use crate::error::{Result, invalid_at as invalid, read_text as read};
 
 /// Replaces each `<include file="..."/>` with the children of the included file's root
 /// (`<mujoco>` or `<mujocoinclude>`), recursively. MuJoCo resolves include paths against the
