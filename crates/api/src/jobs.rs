@@ -283,6 +283,11 @@ pub struct Row {
     /// before 2026-11-24.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub outcomes: BTreeMap<String, u64>,
+    /// The share of these episodes the authors' judge (DexMobile: a rise within 1,000 physics
+    /// steps once the grasp is ready, no hold; a press, a contact) would have passed, beside
+    /// ours (a 5 s steady hold). Absent in reports made before 2026-11-25.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub authors_judge: Option<f64>,
 }
 
 impl Row {
@@ -347,6 +352,9 @@ pub struct EvalReport {
     /// paper's 5 s.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hold_s: Option<f32>,
+    /// The share the authors' judge would have passed ([`Row::authors_judge`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub authors_judge: Option<f64>,
 }
 
 impl EvalReport {
@@ -381,6 +389,11 @@ impl EvalReport {
             "| overall | {:.2} | {:.1} | {:.1} |\n",
             self.success_rate, self.mean_episode_length, self.mean_sim_seconds
         ));
+        if let Some(share) = self.authors_judge {
+            text.push_str(&format!(
+                "\nThe authors' judge (a rise within 1,000 physics steps once ready, no hold) would pass {share:.3}.\n"
+            ));
+        }
         if self.per_task.len() > 1 {
             text.push_str("\n| task | success | episodes | episode length | simulated s | failures |\n| --- | --- | --- | --- | --- | --- |\n");
             for (task, r) in &self.per_task {
@@ -471,6 +484,7 @@ mod tests {
             episodes: outcomes.iter().map(|(_, n)| n).sum(),
             mean_sim_seconds: 5.0,
             outcomes: outcomes.iter().map(|(o, n)| (o.to_string(), *n)).collect(),
+            authors_judge: None,
         };
         let bowl = row(&[
             ("success", 2),
@@ -491,6 +505,7 @@ mod tests {
             objective: ObjectiveMode::default(),
             deterministic: false,
             hold_s: None,
+            authors_judge: None,
             per_objective: BTreeMap::from([("lift".to_string(), row(&[("success", 5)]))]),
             per_task: BTreeMap::from([
                 ("bowl-lift".to_string(), bowl.clone()),

@@ -89,6 +89,15 @@ pub struct SimConfig {
     pub drop_height: f32,
     /// Half side (m) of the arrive box around the grasp location (DESIGN.md: +/-1.5 cm).
     pub arrive_tolerance: f32,
+    /// Largest angle (rad) between the hand's orientation and the task's for `arrive`.
+    /// Default 0.1 rad: twice the wrist's turn per control step, so a wrist that tracks a
+    /// nudged object arrives once it has caught up (the authors' IK reaches the orientation
+    /// exactly and their test checks position only).
+    pub arrive_angle: f32,
+    /// Largest turn (rad) of the wrist per control step while it follows the task's
+    /// orientation on a moving object in the approach (the authors' IK re-aims at the
+    /// object's pose every step). Default 0.05 rad (1.5 rad/s at 30 Hz).
+    pub wrist_turn: f32,
     /// Horizontal displacement (m) of the object from its start that puts it out of reach.
     pub workspace_radius: f32,
     /// Fraction of the friction cone a sticking contact may use: `|F_t| <= (1 - margin) mu F_n`.
@@ -128,6 +137,8 @@ impl Default for SimConfig {
             lift_height: 0.05,
             drop_height: 0.02,
             arrive_tolerance: 0.015,
+            arrive_angle: 0.1,
+            wrist_turn: 0.05,
             workspace_radius: 0.15,
             cone_margin: 0.05,
             crush_steps: 3,

@@ -9,6 +9,8 @@ use crate::config::SimConfig;
 pub struct Snapshot {
     /// Grasp point minus grasp location, per axis (m).
     pub arrive_error: [f32; 3],
+    /// Angle between the hand's orientation and the task's (rad).
+    pub arrive_angle: f32,
     /// Object displacement from its start (m).
     pub displacement: [f32; 3],
     /// Object linear speed (m/s).
@@ -37,6 +39,7 @@ pub struct Judge {
     lift_height: f32,
     drop_height: f32,
     arrive_tolerance: f32,
+    arrive_angle: f32,
     workspace_radius: f32,
     grasp_timeout_s: f32,
     crush_steps: usize,
@@ -121,6 +124,7 @@ impl Judge {
             lift_height: config.lift_height,
             drop_height: config.drop_height,
             arrive_tolerance: config.arrive_tolerance,
+            arrive_angle: config.arrive_angle,
             workspace_radius: config.workspace_radius,
             grasp_timeout_s: config.grasp_timeout_s,
             crush_steps: config.crush_steps,
@@ -161,6 +165,7 @@ impl Judge {
         if s.arrive_error
             .iter()
             .all(|e| e.abs() <= self.arrive_tolerance)
+            && s.arrive_angle <= self.arrive_angle
         {
             events.push("arrive");
         }
@@ -250,8 +255,10 @@ mod tests {
             grasp: GraspLocation {
                 offset: [0.0; 3],
                 yaw: 0.0,
+                orientation: None,
             },
             motion: [0.0, 0.0, 1.0],
+            start: None,
             required,
         }
     }
@@ -490,5 +497,28 @@ mod tests {
             ..Snapshot::default()
         });
         assert_eq!(events, vec!["aor", "gor"]);
+    }
+
+    #[test]
+    fn a_hand_turned_away_from_the_tasks_orientation_has_not_arrived() {
+        let config = SimConfig::deterministic();
+        let mut judge = Judge::new(&task(Objective::Lift, None), 20.0, false, &config);
+        judge.set_stage("approach");
+        let at = |angle: f32| Snapshot {
+            arrive_angle: angle,
+            ..Snapshot::default()
+        };
+        assert!(
+            judge
+                .judge(&at(0.5 * config.arrive_angle))
+                .0
+                .contains(&"arrive")
+        );
+        assert!(
+            !judge
+                .judge(&at(2.0 * config.arrive_angle))
+                .0
+                .contains(&"arrive")
+        );
     }
 }

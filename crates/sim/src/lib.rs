@@ -29,6 +29,7 @@ pub mod env;
 pub mod error;
 pub mod events;
 pub mod hand;
+pub mod import;
 pub mod observation;
 pub mod oracle;
 pub mod ready;

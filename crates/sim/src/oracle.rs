@@ -1,9 +1,12 @@
 //! A scripted grasping controller with privileged state (no learning): it proves the physics
-//! can grasp. It moves to the task's grasp location from above, closes to the topology's
+//! can grasp. It moves to the task's grasp location along the hand's approach axis (from
+//! above for a palm that faces down), closes to the topology's
 //! shape while regulating the grip under the object's force limit, then performs the
 //! objective with the arm's controllers of `script.rs`. Under the paper's protocol the
 //! environment runs those controllers itself once the grasp is ready, inside the step that
 //! made it ready.
+
+use rapier3d::math::Vec3;
 
 use crate::benchmark::Objective;
 use crate::env::GraspEnv;
@@ -12,7 +15,9 @@ use crate::script::GRASP_SCALE;
 
 /// Approach step scale of the grasping spec (m per unit action).
 const APPROACH_SCALE: f32 = 0.01;
-/// Height (m) above the grasp location at which the hand travels before descending.
+/// Distance (m) back from the grasp location, against the hand's approach axis, at which the
+/// hand travels until it is lined up (above it, for a palm that faces down); more for a hand
+/// that reaches further ahead of its grasp point (2 cm beyond its reach).
 const CLEARANCE: f32 = 0.06;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -28,6 +33,9 @@ pub struct Oracle {
     phase: Phase,
     phase_steps: usize,
     settled: usize,
+    /// Whether the hand has lined up with the grasp location in the approach (it then goes
+    /// straight in, and does not back off again).
+    lined_up: bool,
 }
 
 impl Default for Oracle {
@@ -46,6 +54,7 @@ impl Oracle {
             phase: Phase::Align,
             phase_steps: 0,
             settled: 0,
+            lined_up: false,
         }
     }
 
@@ -61,15 +70,20 @@ impl Oracle {
         let parts = env.observation_parts();
         let rel = parts.relative;
         if stage == "approach" {
-            let horizontal = (rel[0] * rel[0] + rel[1] * rel[1]).sqrt();
-            let z_goal = if horizontal > 0.01 {
-                rel[2] + CLEARANCE
+            let rel = Vec3::from(rel);
+            let along = env.approach_direction();
+            let lateral = rel - rel.dot(along) * along;
+            let reach = env.scene().map_or(0.0, |s| s.hand.reach);
+            let clearance = CLEARANCE.max(reach + 0.02);
+            self.lined_up |= lateral.length() <= 0.01;
+            let goal = if !self.lined_up {
+                rel - clearance * along
             } else {
-                rel[2]
+                rel
             };
-            action[0] = unit(rel[0], APPROACH_SCALE);
-            action[1] = unit(rel[1], APPROACH_SCALE);
-            action[2] = unit(z_goal, APPROACH_SCALE);
+            action[0] = unit(goal.x, APPROACH_SCALE);
+            action[1] = unit(goal.y, APPROACH_SCALE);
+            action[2] = unit(goal.z, APPROACH_SCALE);
             return action;
         }
         if stage != "grasp" {

@@ -29,8 +29,10 @@ pub struct Scene {
     pub object_start: Pose,
     /// Where the hand's grasp point should go (world).
     pub grasp_location: Vec3,
-    /// The hand's (fixed) orientation.
+    /// The hand's orientation at reset.
     pub hand_rotation: Rotation,
+    /// The hand's orientation in the object's frame, which the wrist keeps in the approach.
+    pub grasp_rotation: Rotation,
     /// The mount's position at reset (world).
     pub mount_start: Vec3,
 }
@@ -132,7 +134,11 @@ pub fn build(
         Vec3::new(dx, dy, -min[2] + 0.0005),
         Rotation::from_rotation_z(dyaw),
     );
-    let handle = world.insert_body(RigidBodyBuilder::dynamic().pose(object_start));
+    let handle = world.insert_body(
+        RigidBodyBuilder::dynamic()
+            .pose(object_start)
+            .angular_damping(object.angular_damping.unwrap_or(0.0)),
+    );
     let total_volume: f32 = object.parts.iter().map(|p| p.shape.volume()).sum();
     let object_groups = InteractionGroups::new(
         OBJECT_GROUP,
@@ -160,10 +166,17 @@ pub fn build(
         world.insert_impulse_joint(ground, handle, joint);
     }
 
-    let hand_rotation = Rotation::from_rotation_z(dyaw + task.grasp.yaw) * hand.base_rotation;
+    let grasp_rotation = match task.grasp.orientation {
+        Some(q) => {
+            Rotation::from_xyzw(q[0], q[1], q[2], q[3]).normalize() * hand.grasp_frame.inverse()
+        }
+        None => Rotation::from_rotation_z(task.grasp.yaw) * hand.base_rotation,
+    };
+    let hand_rotation = object_start.rotation * grasp_rotation;
     let grasp_location = object_start.transform_point(Vec3::from(task.grasp.offset));
     let grasp_point = hand_rotation * hand.grasp_point;
-    let mount_start = grasp_location + Vec3::from(config.hand_start) - grasp_point;
+    let mount_start =
+        grasp_location + Vec3::from(task.start.unwrap_or(config.hand_start)) - grasp_point;
     let joint_offsets = hand
         .fingers
         .iter()
@@ -201,6 +214,7 @@ pub fn build(
         object_start,
         grasp_location,
         hand_rotation,
+        grasp_rotation,
         mount_start,
     }
 }

@@ -141,10 +141,13 @@ impl GraspEnv {
                 format!("{name}_{seen}")
             };
             *seen += 1;
-            let drawn = collider
-                .parent()
-                .and_then(|body| hand.bodies.iter().position(|&b| b == body))
-                .is_none_or(|i| hand.model.links[i].visuals.is_empty());
+            // A hand collider is drawn unless its body's links bring visual meshes.
+            let drawn = collider.parent().is_none_or(|body| {
+                hand.bodies
+                    .iter()
+                    .zip(&hand.model.links)
+                    .all(|(&b, link)| b != body || link.visuals.is_empty())
+            });
             let pose = collider.position();
             parts.push(Part {
                 name,
@@ -154,12 +157,13 @@ impl GraspEnv {
                 drawn,
             });
         }
-        for (link, &body) in hand.model.links.iter().zip(&hand.bodies) {
+        for ((link, &body), offset) in hand.model.links.iter().zip(&hand.bodies).zip(&hand.offsets)
+        {
             let Some(body) = scene.world.bodies.get(body) else {
                 continue;
             };
             for (k, visual) in link.visuals.iter().enumerate() {
-                let pose = body.position() * visual.pose;
+                let pose = body.position() * *offset * visual.pose;
                 parts.push(Part {
                     name: format!("hand/{}/visual_{k}", link.name),
                     shape: PartShape::Mesh {

@@ -44,6 +44,11 @@ pub struct WorldFile {
     /// What the robot senses (default: every feature).
     #[serde(default)]
     pub sensors: Sensors,
+    /// Folders searched for files after the world's own and before `CRM_ASSETS` (absolute,
+    /// or relative to the world's folder): where an imported world's source lies. Not part
+    /// of the hash, so a copy of the same files elsewhere makes the same world.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub assets: Vec<PathBuf>,
 }
 
 /// Observation features a real robot cannot measure: features by name (`force_x`) or the
@@ -130,6 +135,14 @@ impl World {
         let origin = path.display().to_string();
         let text = read_text(&path)?;
         let file: WorldFile = parse_json(&text, &origin)?;
+        let assets = &Assets {
+            folders: file
+                .assets
+                .iter()
+                .map(|folder| dir.join(folder))
+                .chain(assets.folders.iter().cloned())
+                .collect(),
+        };
         let invalid = |at: &str, message: String| Error::Invalid {
             path: origin.clone(),
             at: at.to_string(),

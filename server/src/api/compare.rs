@@ -375,6 +375,7 @@ mod tests {
             per_task: BTreeMap::new(),
             outcomes: BTreeMap::new(),
             hold_s: None,
+            authors_judge: None,
         };
         let (a, b, c) = (report(0.5, 100.0), report(0.9, 120.0), report(0.9, 90.0));
         let best = best(&[Some(&a), None, Some(&b), Some(&c)], &[]);
@@ -420,6 +421,7 @@ mod tests {
             per_task: BTreeMap::new(),
             outcomes: BTreeMap::new(),
             hold_s: None,
+            authors_judge: None,
         };
         (job, report)
     }

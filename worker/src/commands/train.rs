@@ -45,6 +45,10 @@ pub struct TrainArgs {
     /// Resume from this checkpoint (same algorithm and machine).
     #[arg(long, value_name = "FILE")]
     pub resume: Option<PathBuf>,
+    /// Start from this checkpoint's weights, trained in another world with the same machine
+    /// and observation layout (the same hand with fewer sensors); steps count from 0.
+    #[arg(long, value_name = "FILE", conflicts_with = "resume")]
+    pub fine_tune: Option<PathBuf>,
     /// Also write a checkpoint every this many iterations (0: only at the end).
     #[arg(long, default_value_t = 0)]
     pub checkpoint_every: u64,
@@ -109,7 +113,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         curriculum: args.curriculum,
         hold_s: args.env.hold_s,
     };
-    let mut trainer = Trainer::new(spec.clone(), &args.env, args.resume.as_deref(), None)?;
+    let init = match (&args.resume, &args.fine_tune) {
+        (Some(path), _) => Some(crate::jobs::Init::Resume(path)),
+        (None, Some(path)) => Some(crate::jobs::Init::FineTune(path)),
+        (None, None) => None,
+    };
+    let mut trainer = Trainer::new(spec.clone(), &args.env, init, None)?;
     let bar = indicatif::ProgressBar::new(0);
     demos::imitate(
         &spec,

@@ -133,11 +133,13 @@ struct Sums {
     control_steps: u64,
     seconds: f64,
     outcomes: BTreeMap<String, u64>,
+    authors: u64,
 }
 
 impl Sums {
-    fn add(&mut self, success: bool, length: usize, seconds: f64, outcome: &str) {
+    fn add(&mut self, success: bool, authors: bool, length: usize, seconds: f64, outcome: &str) {
         self.episodes += 1;
+        self.authors += u64::from(authors);
         self.successes += u64::from(success);
         self.control_steps += length as u64;
         self.seconds += seconds;
@@ -152,6 +154,7 @@ impl Sums {
             episodes: self.episodes,
             mean_sim_seconds: self.seconds / n,
             outcomes: self.outcomes,
+            authors_judge: Some(self.authors as f64 / n),
         }
     }
 }
@@ -207,13 +210,14 @@ pub fn evaluate(
             (stage, state) = (step.stage, step.abstract_state);
         };
         let seconds = f64::from(crm_env.env().inner().sim_seconds());
+        let authors = crm_env.env().inner().authors_judge();
         let task = crm_env.env().inner().task().id.clone();
         for entry in [
             sums.entry(objective).or_default(),
             task_sums.entry(task).or_default(),
             &mut overall,
         ] {
-            entry.add(success, length, seconds, &outcome);
+            entry.add(success, authors, length, seconds, &outcome);
         }
         let machine = crm_env.machine();
         let episode = crm_env.episode();
@@ -258,5 +262,6 @@ pub fn evaluate(
         per_task: task_sums.into_iter().map(|(t, s)| (t, s.row())).collect(),
         outcomes: overall.outcomes,
         hold_s: spec.hold_s,
+        authors_judge: overall.authors_judge,
     })
 }

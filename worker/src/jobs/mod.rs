@@ -6,6 +6,8 @@ pub mod demos;
 pub mod eval;
 pub mod train;
 
+pub use train::Init;
+
 use crm_api::Algorithm;
 use grasp_sim::benchmark::Topology;
 use grasp_sim::{Benchmark, GraspEnv, TaskChoice};

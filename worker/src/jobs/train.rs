@@ -27,6 +27,25 @@ enum Learner {
     Sac(Box<Sac>),
 }
 
+/// Where a training starts from, other than fresh weights.
+#[derive(Clone, Copy, Debug)]
+pub enum Init<'a> {
+    /// Go on with this checkpoint of the same world: its steps count.
+    Resume(&'a Path),
+    /// Start from this checkpoint's weights and normalizer, trained in another world with
+    /// the same machine and observation layout (the same hand with fewer sensors: the
+    /// paper's real robot); steps count from 0 and checkpoints belong to this world.
+    FineTune(&'a Path),
+}
+
+impl Init<'_> {
+    pub fn path(&self) -> &Path {
+        match self {
+            Init::Resume(path) | Init::FineTune(path) => path,
+        }
+    }
+}
+
 /// A run in progress.
 pub struct Trainer {
     spec: TrainSpec,
@@ -61,7 +80,7 @@ impl Trainer {
     pub fn new(
         spec: TrainSpec,
         env: &EnvArgs,
-        init: Option<&Path>,
+        init: Option<Init<'_>>,
         recorder: Option<SharedRecorder>,
     ) -> anyhow::Result<Self> {
         if spec.steps == 0 {
@@ -85,7 +104,8 @@ impl Trainer {
         let mut start_steps = 0;
         let mut resume_ppo = None;
         let mut resume_sac = None;
-        if let Some(path) = init {
+        if let Some(init) = init {
+            let path = init.path();
             let header = Checkpoint::read_header(path)?;
             if header.algorithm != spec.algorithm.name() {
                 bail!(
@@ -95,8 +115,15 @@ impl Trainer {
                     spec.algorithm.name()
                 );
             }
-            super::check_world(&header, env.world()?, path)?;
-            start_steps = header.steps;
+            match init {
+                Init::Resume(_) => {
+                    super::check_world(&header, env.world()?, path)?;
+                    start_steps = header.steps;
+                }
+                // Another world's weights: `Checkpoint::load` below still asks for the same
+                // machine (spec hash) and observation layout (`ENV_VERSION`).
+                Init::FineTune(_) => {}
+            }
             if is_sac {
                 resume_sac =
                     Some(Checkpoint::load_sac(path, &spec_hash, grasp_sim::ENV_VERSION)?.0);

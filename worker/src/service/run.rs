@@ -162,7 +162,12 @@ fn train(
     // episode list); evaluations report every episode themselves.
     let recorder = recorder_for(spec.record.as_ref(), job.job_id, true);
     let env = env_for(spec.world.as_deref(), options)?;
-    let mut trainer = Trainer::new(spec.clone(), &env, init.as_deref(), recorder.clone())?;
+    let mut trainer = Trainer::new(
+        spec.clone(),
+        &env,
+        init.as_deref().map(crate::jobs::Init::Resume),
+        recorder.clone(),
+    )?;
     let resumed_from = trainer.steps();
     if resumed_from > 0 {
         tracing::info!(

@@ -179,6 +179,14 @@ impl Benchmark {
                     format!("must be positive, got {}", object.mass),
                 ));
             }
+            if let Some(damping) = object.angular_damping
+                && !(damping.is_finite() && damping >= 0.0)
+            {
+                return Err(invalid(
+                    format!("{at}.angular_damping"),
+                    format!("must be finite and >= 0, got {damping}"),
+                ));
+            }
             if !(object.friction.is_finite() && (0.0..=2.0).contains(&object.friction)) {
                 return Err(invalid(
                     format!("{at}.friction"),
@@ -235,6 +243,20 @@ impl Benchmark {
                     format!("{at}.grasp"),
                     "values must be finite".into(),
                 ));
+            }
+            if let Some(q) = task.grasp.orientation {
+                if crate::hand::model::unit_quaternion(q).is_none() {
+                    return Err(invalid(
+                        format!("{at}.grasp.orientation"),
+                        "must be a unit quaternion [x, y, z, w]".into(),
+                    ));
+                }
+                if task.grasp.yaw != 0.0 {
+                    return Err(invalid(
+                        format!("{at}.grasp.yaw"),
+                        "a grasp with an orientation takes no yaw".into(),
+                    ));
+                }
             }
             let needs_required = matches!(task.objective, Objective::Twist | Objective::Press);
             match (needs_required, task.required) {

@@ -181,6 +181,11 @@ pub struct Object {
     pub anchor: Option<Anchor>,
     #[serde(default)]
     pub flags: ObjectFlags,
+    /// Angular damping of the body (1/s; default 0): what stands in for PyBullet's rolling
+    /// and spinning friction, which rapier lacks, so a tall object resists tipping and
+    /// spinning as it did in its source world.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angular_damping: Option<f32>,
 }
 
 /// Names of [`Object::features`], in order.

@@ -19,6 +19,11 @@ use crate::script::{FINGER_SCALE, GRASP_SCALE, objective_action};
 /// Longest execution (simulated s) of a twist or a press: both are decided within a second
 /// when the grasp turns or presses the object at all.
 const SHORT_LIMIT_S: f32 = 4.0;
+/// The authors' judge (`Dualenv._termination`): a rise within 1,000 physics steps once the
+/// grasp is ready (their arm lifts past 8 cm, ours to 7 cm, so the rise asked is our
+/// `lift_height`); a press passes on a contact within 300.
+const AUTHORS_LIFT_STEPS: usize = 1000;
+const AUTHORS_PRESS_STEPS: usize = 300;
 
 /// Events after which the machine leaves the grasp stage.
 fn decided(events: &[&str]) -> bool {
@@ -100,12 +105,22 @@ impl GraspEnv {
         let start_z = self.mount_target.z;
         let lift = self.config.lift_height;
         let mut events = Vec::new();
+        let objective = self.objective();
+        let (mut physics, mut rose, mut touched) = (0, false, false);
         for _ in 0..limit.max(1) {
             let action = objective_action(self, hold);
             let delta = Vec3::new(action[0], action[1], action[2]) * GRASP_SCALE;
             let fingers: [f32; 5] = std::array::from_fn(|f| action[3 + f] * FINGER_SCALE);
             self.move_fingers(&fingers)?;
             events = self.advance(delta)?;
+            physics += self.config.substeps.max(1);
+            rose |= physics <= AUTHORS_LIFT_STEPS && self.parts.object[2] >= lift;
+            touched |= physics <= AUTHORS_PRESS_STEPS && self.parts.n_c > 0;
+            self.authors_judge = match objective {
+                Objective::Press => touched,
+                Objective::Twist => true,
+                _ => rose,
+            };
             if decided(&events) {
                 return Ok(events);
             }

@@ -60,8 +60,11 @@ pub fn coupled_angles(finger: usize, command: f32) -> Vec<f32> {
 pub struct Hand {
     pub mount: RigidBodyHandle,
     pub palm: RigidBodyHandle,
-    /// All hand bodies, in the model's link order (the palm first).
+    /// All hand bodies, in the model's link order (the palm first); a link welded to its
+    /// parent (a fixed joint) has its parent's body.
     pub bodies: Vec<RigidBodyHandle>,
+    /// Each link's pose in its body (the identity but for welded links).
+    pub offsets: Vec<Pose>,
     /// Links whose contacts count as each finger's, proximal first (thumb first).
     pub links: Vec<Vec<RigidBodyHandle>>,
     /// Links whose contacts count as the palm's (the palm first).
@@ -73,6 +76,9 @@ pub struct Hand {
     pub joint_offsets: Vec<Vec<f32>>,
     /// The commands now in force, thumb first.
     pub commands: [f32; 5],
+    /// How far (m) the hand, as built, reaches ahead of its grasp point along its approach
+    /// axis (a thumb or a palm that stands out in front of the grasp point).
+    pub reach: f32,
     pub model: Arc<HandModel>,
 }
 
@@ -95,7 +101,9 @@ impl Hand {
         hooks: ActiveHooks,
     ) -> Self {
         let shape = model.shape(topology);
-        let commands: [f32; 5] = std::array::from_fn(|i| shape[i].preshape);
+        let commands: [f32; 5] = model
+            .relaxed
+            .unwrap_or_else(|| std::array::from_fn(|i| shape[i].preshape));
         let mut angles = vec![0.0; model.joints.len()];
         for &(j, angle) in model.held(topology) {
             angles[j] = angle;
@@ -122,39 +130,72 @@ impl Hand {
         // Insertion order: the mount, the palm and the wrist, then each link with the joint
         // that holds it (joint k holds link k + 1), depth first.
         let mount = world.insert_body(RigidBodyBuilder::kinematic_position_based().pose(pose));
-        let mut bodies = Vec::with_capacity(model.links.len());
-        let mut joints = Vec::with_capacity(model.joints.len());
-        for (i, (link, pose)) in model.links.iter().zip(&poses).enumerate() {
-            let mut builder = RigidBodyBuilder::dynamic().pose(*pose).gravity_scale(0.0);
-            // The rotor inertia of the joint that moves this link (MuJoCo's armature), on
-            // every axis: impulse joints have no joint-space inertia of their own.
+        // A link fixed to its parent, or moved by a joint the topology holds (a spread, the
+        // thumb's opposition), is welded into its parent's body: light links held by impulse
+        // joints between heavy ones sag and swing (the SVH holds its 130 g fingers through
+        // 24 g spread links and three 10 g fixed ones), where the description means them
+        // rigid and the topology keeps them still.
+        let held: Vec<usize> = model.held(topology).iter().map(|&(j, _)| j).collect();
+        let mut roots = Vec::with_capacity(model.links.len());
+        let mut offsets: Vec<Pose> = Vec::with_capacity(model.links.len());
+        for i in 0..model.links.len() {
+            let parent = (i > 0
+                && (model.joints[i - 1].kind == JointKind::Fixed || held.contains(&(i - 1))))
+            .then(|| model.joints[i - 1].parent);
+            match parent {
+                Some(parent) => {
+                    roots.push(roots[parent]);
+                    offsets.push(offsets[parent] * poses[parent].inverse() * poses[i]);
+                }
+                None => {
+                    roots.push(i);
+                    offsets.push(Pose::IDENTITY);
+                }
+            }
+        }
+        // Mass a body's colliders do not carry: a link without shapes (a knuckle between two
+        // joints) still needs mass and inertia, or the solver holds it as immovable (a 1 cm
+        // sphere of its mass); the rotor inertia of the joint that moves a link (MuJoCo's
+        // armature), on every axis, since impulse joints have no joint-space inertia.
+        let mut extra: Vec<Option<MassProperties>> = vec![None; model.links.len()];
+        for (i, link) in model.links.iter().enumerate() {
             let armature = if i > 0 {
                 model.joints[i - 1].armature
             } else {
                 0.0
             };
-            if link.shapes.is_empty() {
-                // A link without shapes (a knuckle between two joints) still needs mass and
-                // inertia, or the solver holds it as immovable: a 1 cm sphere of its mass.
+            let at = offsets[i].translation;
+            let props = if link.shapes.is_empty() {
                 let mass = if link.mass > 0.0 {
                     link.mass
                 } else {
                     SHAPELESS_MASS
                 };
                 let inertia = 0.4 * mass * 0.01 * 0.01 + armature;
-                builder = builder.additional_mass_properties(MassProperties::new(
-                    Vec3::ZERO,
-                    mass,
-                    Vec3::splat(inertia),
-                ));
+                MassProperties::new(at, mass, Vec3::splat(inertia))
             } else if armature > 0.0 {
-                builder = builder.additional_mass_properties(MassProperties::new(
-                    Vec3::ZERO,
-                    0.0,
-                    Vec3::splat(armature),
-                ));
-            }
-            let body = world.insert_body(builder);
+                MassProperties::new(at, 0.0, Vec3::splat(armature))
+            } else {
+                continue;
+            };
+            let slot = &mut extra[roots[i]];
+            *slot = Some(match slot.take() {
+                Some(sum) => sum + props,
+                None => props,
+            });
+        }
+        let mut bodies: Vec<RigidBodyHandle> = Vec::with_capacity(model.links.len());
+        let mut joints = Vec::with_capacity(model.joints.len());
+        for (i, (link, pose)) in model.links.iter().zip(&poses).enumerate() {
+            let body = if roots[i] == i {
+                let mut builder = RigidBodyBuilder::dynamic().pose(*pose).gravity_scale(0.0);
+                if let Some(props) = extra[i] {
+                    builder = builder.additional_mass_properties(props);
+                }
+                world.insert_body(builder)
+            } else {
+                bodies[roots[i]]
+            };
             let volumes: Vec<f32> = link
                 .shapes
                 .iter()
@@ -163,7 +204,7 @@ impl Hand {
             let total: f32 = volumes.iter().sum();
             for ((local, shape), volume) in link.shapes.iter().zip(&volumes) {
                 let mut collider = ColliderBuilder::new(shape.clone())
-                    .position(*local)
+                    .position(offsets[i] * *local)
                     .friction(model.friction)
                     .active_hooks(hooks)
                     .collision_groups(hand_groups());
@@ -185,6 +226,10 @@ impl Hand {
                 continue;
             }
             let joint = &model.joints[i - 1];
+            if roots[i] != i {
+                joints.push(ImpulseJointHandle::invalid());
+                continue;
+            }
             let data = match joint.kind {
                 // A model holds no other kind (`HandModel::new` refuses them).
                 JointKind::Fixed | JointKind::Other => {
@@ -206,7 +251,7 @@ impl Hand {
                         .motor_max_force(JointAxis::AngX, joint.torque)
                 }
             }
-            .local_frame1(joint.frame1)
+            .local_frame1(offsets[joint.parent] * joint.frame1)
             .local_frame2(joint.frame2);
             joints.push(world.insert_impulse_joint(bodies[joint.parent], body, data));
         }
@@ -217,15 +262,35 @@ impl Hand {
             .map(|f| f.links.iter().map(|&l| bodies[l]).collect())
             .collect();
         let palm_links = model.palm_links.iter().map(|&l| bodies[l]).collect();
+        let to_palm = pose.inverse();
+        let axis = model.approach_axis;
+        let mut reach = 0.0f32;
+        for body in bodies.iter().filter_map(|&b| world.bodies.get(b)) {
+            for collider in body
+                .colliders()
+                .iter()
+                .filter_map(|&c| world.colliders.get(c))
+            {
+                let aabb = collider
+                    .shape()
+                    .compute_aabb(&(to_palm * *collider.position()));
+                let ahead: f32 = (0..3)
+                    .map(|i| (aabb.mins[i] * axis[i]).max(aabb.maxs[i] * axis[i]))
+                    .sum();
+                reach = reach.max(ahead - model.grasp_point.dot(axis));
+            }
+        }
         Self {
             mount,
             palm,
             bodies,
+            offsets,
             links,
             palm_links,
             joints,
             joint_offsets,
             commands,
+            reach,
             model: model.clone(),
         }
     }
@@ -261,7 +326,7 @@ impl Hand {
             world
                 .bodies
                 .get(self.bodies[link])
-                .map(|b| *b.position())
+                .map(|b| *b.position() * self.offsets[link])
                 .unwrap_or_default()
         };
         let frame1 = pose(model.parent) * model.frame1;
@@ -321,10 +386,21 @@ impl Hand {
             .map(|i| self.model.links[i].name.as_str())
     }
 
-    /// Moves the mount to `translation` at the end of the next physics step.
-    pub fn move_mount(&self, world: &mut PhysicsWorld, translation: Vec3) {
+    /// Moves the mount to `translation` (and turns it to `rotation`) at the end of the next
+    /// physics step.
+    pub fn move_mount(
+        &self,
+        world: &mut PhysicsWorld,
+        translation: Vec3,
+        rotation: Option<Rotation>,
+    ) {
         if let Some(body) = world.bodies.get_mut(self.mount) {
-            body.set_next_kinematic_translation(translation);
+            match rotation {
+                Some(rotation) => {
+                    body.set_next_kinematic_position(Pose::from_parts(translation, rotation))
+                }
+                None => body.set_next_kinematic_translation(translation),
+            }
         }
     }
 }

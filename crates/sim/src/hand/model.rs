@@ -55,6 +55,12 @@ pub struct HandModel {
     pub grasp_point: Vec3,
     /// The palm's orientation in the world at a task's zero yaw.
     pub base_rotation: Rotation,
+    /// The frame a task's grasp orientation places, in the palm frame (profile `grasp_frame`).
+    pub grasp_frame: Rotation,
+    /// The direction the palm approaches along, in the palm frame (unit).
+    pub approach_axis: Vec3,
+    /// Commands held through the approach (profile `relaxed`), if the hand preshapes late.
+    pub relaxed: Option<[f32; 5]>,
     pub friction: f32,
     pub wrist: Wrist,
     pub motor: Motor,
@@ -65,6 +71,13 @@ pub struct HandModel {
 
 fn finite(values: &[f32]) -> bool {
     values.iter().all(|v| v.is_finite())
+}
+
+/// `[x, y, z, w]` as a rotation, if finite and of norm 1 (within 1e-3).
+pub fn unit_quaternion(q: [f32; 4]) -> Option<Rotation> {
+    let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+    (finite(&q) && (norm - 1.0).abs() <= 1e-3)
+        .then(|| Rotation::from_xyzw(q[0], q[1], q[2], q[3]).normalize())
 }
 
 impl HandModel {
@@ -172,6 +185,15 @@ impl HandModel {
         if !finite(&profile.grasp_point) {
             return Err(invalid("grasp_point".into(), "must be finite".into()));
         }
+        let grasp_frame = match profile.grasp_frame {
+            None => Rotation::IDENTITY,
+            Some(q) => unit_quaternion(q).ok_or_else(|| {
+                invalid(
+                    "grasp_frame".into(),
+                    "must be a unit quaternion [x, y, z, w]".into(),
+                )
+            })?,
+        };
 
         let mut fingers = Vec::new();
         let mut commanded = Vec::new();
@@ -216,6 +238,26 @@ impl HandModel {
                     format!("unknown finger {name:?}; one of {FINGERS:?}"),
                 )
             })
+        };
+        let relaxed = if profile.relaxed.is_empty() {
+            None
+        } else {
+            let mut commands = [0.0; 5];
+            for (name, &value) in &profile.relaxed {
+                let f = finger_index(name, "relaxed")?;
+                let [lo, hi] = fingers[f].range;
+                if !(value.is_finite() && value >= lo.min(hi) && value <= lo.max(hi)) {
+                    return Err(invalid(
+                        format!("relaxed.{name}"),
+                        format!(
+                            "must be within the finger's range {:?}, got {value}",
+                            fingers[f].range
+                        ),
+                    ));
+                }
+                commands[f] = value;
+            }
+            Some(commands)
         };
         let mut shapes = BTreeMap::new();
         let mut held = BTreeMap::new();
@@ -314,6 +356,9 @@ impl HandModel {
             palm_links,
             grasp_point: Vec3::from(profile.grasp_point),
             base_rotation,
+            grasp_frame,
+            approach_axis: approach,
+            relaxed,
             friction: profile.friction,
             wrist: profile.wrist,
             motor: profile.motor,

@@ -28,6 +28,12 @@ pub struct Profile {
     pub approach_axis: [f32; 3],
     /// The direction the fingers point, in the palm frame: world +x at a task's zero yaw.
     pub finger_axis: [f32; 3],
+    /// The frame a task's `grasp.orientation` places, as a unit quaternion `[x, y, z, w]` in
+    /// the palm frame (default: the palm frame itself). An imported world puts here the frame
+    /// its source's tasks were written for (DexMobile: their end-effector link's, turned by
+    /// their `convert_hand`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grasp_frame: Option<[f32; 4]>,
     /// Friction coefficient of every hand collider.
     pub friction: f32,
     pub wrist: Wrist,
@@ -35,6 +41,12 @@ pub struct Profile {
     pub fingers: Fingers,
     /// The shape of every topology (all six).
     pub topologies: BTreeMap<Topology, TopologyShape>,
+    /// Finger commands held through the approach, by finger name (default: none, so the hand
+    /// approaches in its topology's preshape). Where given, the hand takes the preshape when
+    /// the grasp stage begins, as the authors' hand does (their `relax` pose, then the
+    /// topology's grasp pose).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub relaxed: BTreeMap<String, f32>,
     /// Joints the paper's action does not move (spread, thumb opposition), held at these
     /// angles in every topology unless the topology says otherwise; any other joint of the
     /// hand that no finger commands is held at 0.
