@@ -1,8 +1,8 @@
 //! A scripted grasping controller with privileged state (no learning): it proves the physics
 //! can grasp. It moves to the task's grasp location along the hand's approach axis (from
-//! above for a palm that faces down), closes to the topology's
-//! shape while regulating the grip under the object's force limit, then performs the
-//! objective with the arm's controllers of `script.rs`. Under the paper's protocol the
+//! above for a palm that faces down), closes to the topology's shape while regulating the
+//! grip under the object's force limit, then performs the objective with the arm's
+//! controllers of `script.rs`. Under the paper's protocol the
 //! environment runs those controllers itself once the grasp is ready, inside the step that
 //! made it ready.
 

@@ -215,8 +215,9 @@ impl GraspEnv {
     /// Whether the authors' judge (DexMobile's `Dualenv._termination`) would have passed this
     /// episode: once the grasp was ready, the object rose within 1,000 physics steps (theirs
     /// asks 8 cm of an arm that lifts further; ours lifts to 7 cm, so the rise asked is
-    /// `lift_height`), with no hold asked (a press: a hand contact within 300). A twist counts once ready: their code lifts it,
-    /// ours turns an anchored object, so there is no rise to measure. Scripted protocol only.
+    /// `lift_height`), with no hold asked (a press: a hand contact within 300). A twist
+    /// counts once ready: their code lifts it, ours turns an anchored object, so there is no
+    /// rise to measure. Scripted protocol only.
     pub fn authors_judge(&self) -> bool {
         self.authors_judge
     }
