@@ -61,7 +61,7 @@ pub struct Hand {
     pub mount: RigidBodyHandle,
     pub palm: RigidBodyHandle,
     /// All hand bodies, in the model's link order (the palm first); a link welded to its
-    /// parent (a fixed joint) has its parent's body.
+    /// parent (behind a fixed joint or one the topology holds) has its parent's body.
     pub bodies: Vec<RigidBodyHandle>,
     /// Each link's pose in its body (the identity but for welded links).
     pub offsets: Vec<Pose>,
@@ -69,7 +69,8 @@ pub struct Hand {
     pub links: Vec<Vec<RigidBodyHandle>>,
     /// Links whose contacts count as the palm's (the palm first).
     pub palm_links: Vec<RigidBodyHandle>,
-    /// Every joint of the model, in its order.
+    /// Every joint of the model, in its order (`ImpulseJointHandle::invalid()` for the joint
+    /// of a welded link).
     pub joints: Vec<ImpulseJointHandle>,
     /// Per finger, calibration offsets (domain randomization) of its coupled joints, added to
     /// their motor targets.
