@@ -239,23 +239,27 @@ impl HandModel {
                 )
             })
         };
+        // A command by finger name at `at`: the finger, if the value is within its range.
+        let command = |name: &str, value: f32, at: &str| {
+            let f = finger_index(name, at)?;
+            let [lo, hi] = fingers[f].range;
+            if !(value.is_finite() && value >= lo.min(hi) && value <= lo.max(hi)) {
+                return Err(invalid(
+                    format!("{at}.{name}"),
+                    format!(
+                        "must be within the finger's range {:?}, got {value}",
+                        fingers[f].range
+                    ),
+                ));
+            }
+            Ok(f)
+        };
         let relaxed = if profile.relaxed.is_empty() {
             None
         } else {
             let mut commands = [0.0; 5];
             for (name, &value) in &profile.relaxed {
-                let f = finger_index(name, "relaxed")?;
-                let [lo, hi] = fingers[f].range;
-                if !(value.is_finite() && value >= lo.min(hi) && value <= lo.max(hi)) {
-                    return Err(invalid(
-                        format!("relaxed.{name}"),
-                        format!(
-                            "must be within the finger's range {:?}, got {value}",
-                            fingers[f].range
-                        ),
-                    ));
-                }
-                commands[f] = value;
+                commands[command(name, value, "relaxed")?] = value;
             }
             Some(commands)
         };
@@ -276,17 +280,7 @@ impl HandModel {
             }
             for (field, values) in [("preshape", &shape.preshape), ("closed", &shape.closed)] {
                 for (name, &value) in values {
-                    let f = finger_index(name, &format!("{at}.{field}"))?;
-                    let [lo, hi] = fingers[f].range;
-                    if !(value.is_finite() && value >= lo.min(hi) && value <= lo.max(hi)) {
-                        return Err(invalid(
-                            format!("{at}.{field}.{name}"),
-                            format!(
-                                "must be within the finger's range {:?}, got {value}",
-                                fingers[f].range
-                            ),
-                        ));
-                    }
+                    let f = command(name, value, &format!("{at}.{field}"))?;
                     if field == "preshape" {
                         fingers_shape[f].preshape = value;
                     } else {
