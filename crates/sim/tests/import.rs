@@ -1,9 +1,9 @@
 //! `import::dexmobile` on a stand-in of the authors' repository made by
 //! `scripts/make-dexmobile-standin` (CI has no copy of theirs): the world it writes loads,
 //! points at the copy without copying it, has the same hash wherever the copy and the world
-//! lie, places the hand at the task's orientation, stands up an object that cannot stand
-//! alone, and bad copies are refused naming the file (and the CSV's line and column) with
-//! nothing written.
+//! lie, places the hand at the task's orientation with the thumb opposed as the authors' code
+//! drives it, stands up an object that cannot stand alone, and bad copies are refused naming
+//! the file (and the CSV's line and column) with nothing written.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -104,6 +104,35 @@ fn the_hand_starts_at_the_tasks_orientation_and_an_object_that_tips_gets_a_stand
             scene.object_start.rotation * rapier3d::math::Vec3::Y
         };
         assert!(normal.dot(expected) > 0.99, "{}: {normal:?}", task.id);
+    }
+}
+
+#[test]
+fn the_thumb_opposes_as_the_authors_code_drives_it() {
+    // `Dualcontrol.applyAction` drives joint 78, the opposition, to the grasp pose's element 6
+    // (the index PIP), and PyBullet stops it at the joint's limit: 0.7369 rad for poPmAb25
+    // (the stand-in's task 0) and the limit, 0.9879, for inSiAd2 (task 2; its element 6 is
+    // 1.105). Element 0 (0.1 and 0) would leave the thumb 36 and 57 degrees off.
+    let copy = standin("thumb");
+    let world_dir = out("thumb");
+    import(&copy, &world_dir, &Options::default()).expect("imports");
+    let world = World::load_with(&world_dir, &Assets::default()).expect("loads");
+    for (t, wanted) in [(0, 0.7369), (2, 0.9879)] {
+        let mut env = GraspEnv::new(world.benchmark.clone(), SimConfig::deterministic());
+        env.reset_task(t, 1).expect("reset");
+        let scene = env.scene().expect("scene");
+        let j = scene
+            .hand
+            .model
+            .joints
+            .iter()
+            .position(|joint| joint.name == "right_hand_Thumb_Opposition")
+            .expect("the opposition joint");
+        let angle = scene.hand.joint_angle(&scene.world, j);
+        assert!(
+            (angle - wanted).abs() < 0.01,
+            "task {t}: opposition at {angle} rad, the authors' code drives it to {wanted}"
+        );
     }
 }
 
