@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use grasp_sim::assets::Assets;
+use grasp_sim::hand::Hand;
 use grasp_sim::import::dexmobile::{Options, import};
 use grasp_sim::{GraspEnv, SimConfig, World};
 
@@ -24,6 +25,15 @@ fn standin(tag: &str) -> PathBuf {
         .expect("python3 runs scripts/make-dexmobile-standin");
     assert!(status.success(), "make-dexmobile-standin failed");
     root
+}
+
+/// The index of the hand's joint `name` in its model.
+fn joint(hand: &Hand, name: &str) -> usize {
+    hand.model
+        .joints
+        .iter()
+        .position(|joint| joint.name == name)
+        .unwrap_or_else(|| panic!("no joint {name}"))
 }
 
 fn out(tag: &str) -> PathBuf {
@@ -121,13 +131,7 @@ fn the_thumb_opposes_as_the_authors_code_drives_it() {
         let mut env = GraspEnv::new(world.benchmark.clone(), SimConfig::deterministic());
         env.reset_task(t, 1).expect("reset");
         let scene = env.scene().expect("scene");
-        let j = scene
-            .hand
-            .model
-            .joints
-            .iter()
-            .position(|joint| joint.name == "right_hand_Thumb_Opposition")
-            .expect("the opposition joint");
+        let j = joint(&scene.hand, "right_hand_Thumb_Opposition");
         let angle = scene.hand.joint_angle(&scene.world, j);
         assert!(
             (angle - wanted).abs() < 0.01,
@@ -161,13 +165,7 @@ fn fingers_behind_a_chain_of_fixed_links_hold_their_pose_while_the_arm_moves() {
         env.step_action(&[0.7, -0.7, dz, 0.0, 0.0, 0.0, 0.0, 0.0])
             .expect("step");
         let scene = env.scene().expect("scene");
-        let j = scene
-            .hand
-            .model
-            .joints
-            .iter()
-            .position(|joint| joint.name == "right_hand_Index_Finger_Proximal")
-            .unwrap();
+        let j = joint(&scene.hand, "right_hand_Index_Finger_Proximal");
         eprintln!(
             "step {k} n_c {} angle {}",
             env.observation_parts().n_c,
@@ -183,12 +181,7 @@ fn fingers_behind_a_chain_of_fixed_links_hold_their_pose_while_the_arm_moves() {
         ("right_hand_Index_Finger_Distal", 1.0),
         ("right_hand_Middle_Finger_Proximal", 0.67),
     ] {
-        let j = hand
-            .model
-            .joints
-            .iter()
-            .position(|joint| joint.name == name)
-            .expect("joint");
+        let j = joint(hand, name);
         let angle = hand.joint_angle(&scene.world, j);
         assert!(
             (angle - ratio * 0.1).abs() < 0.05,
