@@ -121,8 +121,9 @@ fn the_hand_starts_at_the_tasks_orientation_and_an_object_that_tips_gets_a_stand
 fn the_thumb_opposes_as_the_authors_code_drives_it() {
     // `Dualcontrol.applyAction` drives joint 78, the opposition, to the grasp pose's element 6
     // (the index PIP), and PyBullet stops it at the joint's limit: 0.7369 rad for poPmAb25
-    // (the stand-in's task 0) and the limit, 0.9879, for inSiAd2 (task 2; its element 6 is
-    // 1.105). Element 0 (0.1 and 0) would leave the thumb 36 and 57 degrees off.
+    // (the stand-in's task 0) and the limit for inSiAd2 (task 2; its element 6 is 1.105; the
+    // limit is 0.9879 in theirs, 0.99 in the stand-in). Element 0 (0.1 and 0) would leave the
+    // thumb 36 and 57 degrees off.
     let copy = standin("thumb");
     let world_dir = out("thumb");
     import(&copy, &world_dir, &Options::default()).expect("imports");

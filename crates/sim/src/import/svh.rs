@@ -89,49 +89,44 @@ const FINGERS: [SvhFinger; 5] = [
 
 const NAMES: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
 
-/// The upper limit of `right_hand_Thumb_Opposition` in `dual_2hand.urdf` (rad).
-const OPPOSITION_MAX: f32 = 0.9879;
+/// The thumb's opposition joint, held per topology (see [`topologies`]).
+const OPPOSITION: &str = "right_hand_Thumb_Opposition";
 
-/// Per topology (Helper.py lines 149-184, the 19-joint grasp poses): the thumb's opposition,
-/// the PIP commands the fingers start the grasp stage from (elements 2, 6, 9, 17, 13),
-/// rounded to 1e-4, and which fingers act (`Dualcontrol.applyAction`).
+/// Per topology (Helper.py lines 149-184, the 19-joint grasp poses): the PIP commands the
+/// fingers start the grasp stage from (elements 2, 6, 9, 17, 13), rounded to 1e-4, and which
+/// fingers act (`Dualcontrol.applyAction`).
 ///
-/// The opposition is what the authors' code drives it to, not the pose's element 0:
-/// `Dualcontrol.applyAction` sets joint 78 (`right_hand_Thumb_Opposition`) to `self.grasp[6]`,
+/// The thumb's opposition is held where the authors' code drives it, not at the pose's
+/// element 0: `Dualcontrol.applyAction` sets joint 78 ([`OPPOSITION`]) to `self.grasp[6]`,
 /// the pose's index PIP, in both stages, and PyBullet stops it at the joint's upper limit
 /// (0.9879 in `dual_2hand.urdf`). Their hand reaches it within a second or two of the
 /// approach; ours holds it from the start. In PyBullet, at the first grasp step of tasks 7
 /// and 11, joint 78 reads 0.730 and 0.723.
-fn topologies() -> [(Topology, f32, [f32; 5], &'static [&'static str]); 6] {
+fn topologies() -> [(Topology, [f32; 5], &'static [&'static str]); 6] {
     [
-        (Topology::Platform, 0.0, [0.0; 5], &[]),
+        (Topology::Platform, [0.0; 5], &[]),
         (
             Topology::InSiAd2,
-            OPPOSITION_MAX,
             [0.0446, 1.1050, 1.1363, 1.0110, 0.9759],
             &["thumb"],
         ),
         (
             Topology::PPdAb2,
-            0.7690,
             [0.2693, 0.7690, 0.0, 0.0, 0.0],
             &["thumb", "index"],
         ),
         (
             Topology::PPdAb23,
-            0.7302,
             [0.2934, 0.7302, 0.7046, 0.0, 0.0],
             &["thumb", "index", "middle"],
         ),
         (
             Topology::PPdAb25,
-            0.7232,
             [0.2949, 0.7232, 0.7611, 0.7239, 0.5681],
             &["thumb", "index", "middle", "ring", "little"],
         ),
         (
             Topology::PoPmAb25,
-            0.7369,
             [0.2583, 0.7369, 0.8006, 0.7306, 0.6378],
             &["thumb", "index", "middle", "ring", "little"],
         ),
@@ -179,8 +174,16 @@ pub fn profile(description: &Description) -> Result<Profile, String> {
         .collect();
     let [thumb, index, middle, ring, little]: [Finger; 5] =
         fingers.try_into().map_err(|_| "five fingers".to_string())?;
+    let opposition_max = description
+        .joint(OPPOSITION)
+        .and_then(|j| description.joints[j].limits)
+        .map(|[_, upper]| upper)
+        .ok_or_else(|| {
+            format!("{DESCRIPTION}: joint {OPPOSITION:?} is missing or has no limits")
+        })?;
     let mut shapes = BTreeMap::new();
-    for (topology, opposition, preshape, active) in topologies() {
+    for (topology, preshape, active) in topologies() {
+        let opposition = preshape[1].min(opposition_max);
         let by_name = |values: [f32; 5]| -> BTreeMap<String, f32> {
             NAMES
                 .iter()
@@ -203,7 +206,7 @@ pub fn profile(description: &Description) -> Result<Profile, String> {
                 active: active.iter().map(|n| (*n).to_string()).collect(),
                 preshape: by_name(preshape),
                 closed: by_name(closed),
-                held: BTreeMap::from([("right_hand_Thumb_Opposition".into(), opposition)]),
+                held: BTreeMap::from([(OPPOSITION.into(), opposition)]),
             },
         );
     }
@@ -252,7 +255,7 @@ pub fn profile(description: &Description) -> Result<Profile, String> {
         relaxed: NAMES.iter().map(|n| ((*n).to_string(), 0.1)).collect(),
         // Spreads at 0 in every grasp pose (elements 4, 11, 15); opposition per topology.
         held: BTreeMap::from([
-            ("right_hand_Thumb_Opposition".into(), 0.0),
+            (OPPOSITION.into(), 0.0),
             ("right_hand_Finger_Spread".into(), 0.0),
             ("right_hand_index_spread".into(), 0.0),
             ("right_hand_ring_spread".into(), 0.0),
