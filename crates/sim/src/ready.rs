@@ -3,7 +3,9 @@
 //! it without crushing it.
 //!
 //! Per topology: the thumb opposes at least one other finger of the topology, both touching
-//! (a finger touches when its links' normal forces add up to `ready_finger_force`), and the
+//! (a finger touches when its links' normal forces add up to `ready_finger_force`; a
+//! topology that moves only the thumb, as the SVH's InSiAd2 does, presses it against a
+//! finger it holds still, which then counts: the authors ask InSiAd2 for any two parts), and the
 //! three- and five-finger topologies touch with at least three parts (a part is a finger link
 //! or the palm). The authors' code asks pPdAb2 for thumb and index, pPdAb23 for thumb, index
 //! and three parts, pPdAb25 and poPmAb25 for four parts and InSiAd2 for two; four parts
@@ -94,8 +96,13 @@ impl ReadyTest {
         if touch.grip < self.need || touch.grip >= self.limit {
             return false;
         }
-        let finger = |f: usize| self.active[f] && touch.fingers[f] >= self.part_force;
-        let opposed = finger(0) && (1..5).any(finger);
+        // A topology that moves the thumb alone (the SVH's InSiAd2: the thumb closes on the
+        // side of the preshaped index) opposes it with a finger it holds still.
+        let side = self.active[0] && !self.active[1..].iter().any(|&a| a);
+        let touching = |f: usize| touch.fingers[f] >= self.part_force;
+        let opposed = self.active[0]
+            && touching(0)
+            && (1..5).any(|f| (self.active[f] || side) && touching(f));
         let parts = match self.topology {
             Topology::PPdAb23 | Topology::PPdAb25 | Topology::PoPmAb25 => 3,
             _ => 2,
@@ -178,6 +185,20 @@ mod tests {
         assert!(!wide.is_ready(&pinch(&[0, 1], grip)));
         assert!(!wide.is_ready(&pinch(&[1, 2, 3], grip)));
         assert!(wide.is_ready(&pinch(&[0, 1, 2], grip)));
+    }
+
+    #[test]
+    fn a_thumb_alone_closes_on_a_finger_held_still() {
+        // The SVH's InSiAd2 moves only the thumb; the index is preshaped and held.
+        let mut test = test_for(Topology::InSiAd2, "mug");
+        test.active = [true, false, false, false, false];
+        let grip = test.need + 1.0;
+        assert!(test.is_ready(&pinch(&[0, 1], grip)));
+        assert!(!test.is_ready(&pinch(&[0], grip)));
+        assert!(!test.is_ready(&pinch(&[1, 2], grip)));
+        // A thumb held still opposes nothing.
+        test.active = [false, true, false, false, false];
+        assert!(!test.is_ready(&pinch(&[0, 1], grip)));
     }
 
     #[test]
