@@ -1,11 +1,13 @@
 //! One seeded episode of a task, step by step from the grasp stage on, as JSON lines: the
 //! action, the finger commands, the grip, each finger's normal force, the touching parts,
 //! whether the ready test passes, the event and whether the arm has taken over. The oracle
-//! approaches; in the grasp stage it acts too, or every finger closes at a constant `--close`
-//! (the closing-only actions a policy sends). The last line says how the episode ended.
+//! approaches; in the grasp stage it acts too, or every finger closes at a constant `CLOSE`
+//! (the closing-only actions a policy sends; a value outside 0..=1 leaves the oracle acting).
+//! The last line says how the episode ended.
 //!
 //! This is how a world's hand-over is checked: whether a topology's grasp can pass the ready
-//! test before the grip crushes the object (docs/WORLDS.md, "InSiAd2's ready test").
+//! test before the grip crushes the object (docs/WORLDS.md, "The ready test of a topology that
+//! moves only the thumb").
 //!
 //! ```sh
 //! cargo run --release -p grasp-sim --example trace-grasp -- WORLD_DIR TASK_ID [CLOSE] [SEED]
