@@ -14,7 +14,6 @@ use std::path::Path;
 use anyhow::{Context, bail};
 use grasp_sim::benchmark::Shape;
 use grasp_sim::oracle::Oracle;
-use grasp_sim::spec::grasping_machine;
 use grasp_sim::{GraspEnv, SimConfig, TaskChoice, World};
 use rapier3d::prelude::{Pose, Rotation, Vec3};
 
@@ -42,10 +41,7 @@ fn main() -> anyhow::Result<()> {
             _ => None,
         })
         .with_context(|| format!("object {:?} has no mesh part", object.name))?;
-    let machine = match world.spec.clone() {
-        Some(spec) => crm::Machine::from_spec(spec)?,
-        None => grasping_machine(),
-    };
+    let machine = world.machine()?;
     let mut env = GraspEnv::new(benchmark.clone(), SimConfig::deterministic());
     env.set_task_choice(TaskChoice::Fixed(task))?;
     let mut crm_env = crm::CrmEnv::new(machine, env, crm::RewardMode::Crm);

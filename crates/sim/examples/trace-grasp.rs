@@ -18,7 +18,6 @@ use std::path::Path;
 use anyhow::{Context, bail};
 use grasp_sim::oracle::Oracle;
 use grasp_sim::ready::touch;
-use grasp_sim::spec::grasping_machine;
 use grasp_sim::{GraspEnv, SimConfig, TaskChoice, World};
 use serde_json::json;
 
@@ -46,10 +45,7 @@ fn main() -> anyhow::Result<()> {
         .iter()
         .position(|t| &t.id == id)
         .with_context(|| format!("no task {id:?} in {dir}"))?;
-    let machine = match world.spec.clone() {
-        Some(spec) => crm::Machine::from_spec(spec)?,
-        None => grasping_machine(),
-    };
+    let machine = world.machine()?;
     let mut env = GraspEnv::new(benchmark, SimConfig::default());
     env.set_task_choice(TaskChoice::Fixed(task))?;
     let mut crm_env = crm::CrmEnv::new(machine, env, crm::RewardMode::Crm);

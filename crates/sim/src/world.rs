@@ -124,6 +124,14 @@ impl World {
         }
     }
 
+    /// The world's CRM: the machine of its spec, or the built-in grasping machine.
+    pub fn machine(&self) -> Result<crm::Machine> {
+        match &self.spec {
+            Some(spec) => Ok(crm::Machine::from_spec(spec.clone())?),
+            None => Ok(crate::spec::grasping_machine()),
+        }
+    }
+
     /// Loads the world in `dir`, finding files through `CRM_ASSETS`.
     pub fn load(dir: &Path) -> Result<Self> {
         Self::load_with(dir, &Assets::from_env())
@@ -308,5 +316,22 @@ mod tests {
         assert_eq!(world.hash, builtin.hash);
         assert_eq!(world.benchmark.tasks, builtin.benchmark.tasks);
         assert_eq!(world.summary()["hand"]["joints"], 14);
+    }
+
+    #[test]
+    fn a_world_without_a_spec_runs_the_grasping_machine_and_one_with_a_spec_runs_its_own() {
+        let mut world = World::builtin();
+        let grasping = crate::spec::grasping_machine();
+        let machine = world.machine().expect("built-in machine");
+        assert_eq!(machine.stage_count(), grasping.stage_count());
+        world.spec = Some(crate::spec::flat_spec());
+        let flat = world.machine().expect("flat machine");
+        assert_eq!(
+            flat.stage_name(0),
+            crm::Machine::from_spec(crate::spec::flat_spec())
+                .expect("flat")
+                .stage_name(0)
+        );
+        assert_ne!(flat.stage_count(), grasping.stage_count());
     }
 }
