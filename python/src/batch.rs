@@ -114,22 +114,18 @@ impl Batch {
         } else {
             let mut indices = Vec::new();
             for id in &options.tasks {
-                let index = benchmark
-                    .tasks
-                    .iter()
-                    .position(|t| &t.id == id)
-                    .ok_or_else(|| {
-                        format!(
-                            "task: unknown task {id:?} (the world {:?} has {})",
-                            world.name,
-                            benchmark
-                                .tasks
-                                .iter()
-                                .map(|t| t.id.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        )
-                    })?;
+                let index = benchmark.task_index(id).ok_or_else(|| {
+                    format!(
+                        "task: unknown task {id:?} (the world {:?} has {})",
+                        world.name,
+                        benchmark
+                            .tasks
+                            .iter()
+                            .map(|t| t.id.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                })?;
                 indices.push(index);
             }
             if let [one] = indices[..] {
@@ -151,10 +147,7 @@ impl Batch {
         if let Some(hold) = options.hold_s {
             config.hold_s = hold;
         }
-        let machine = match &world.spec {
-            Some(spec) => Machine::from_spec(spec.clone()).map_err(|e| format!("world: {e}"))?,
-            None => grasp_sim::spec::grasping_machine(),
-        };
+        let machine = world.machine().map_err(|e| format!("world: {e}"))?;
         let slots = (0..count)
             .map(|_| {
                 let mut inner = GraspEnv::new(benchmark.clone(), config.clone());

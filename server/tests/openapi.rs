@@ -86,3 +86,27 @@ fn the_documents_task_and_topology_enums_are_the_catalogs() {
         }
     }
 }
+
+#[test]
+fn the_documents_learner_settings_are_the_configs_fields() {
+    let doc: serde_json::Value =
+        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
+    let schemas = &doc["components"]["schemas"];
+    let keys = |v: &serde_json::Value| -> Vec<String> {
+        let mut keys: Vec<String> = v.as_object().expect("object").keys().cloned().collect();
+        keys.sort();
+        keys
+    };
+    let ppo = serde_json::to_value(crm_api::PpoConfig::default()).expect("ppo config");
+    let sac = serde_json::to_value(crm_api::SacConfig::default()).expect("sac config");
+    assert_eq!(keys(&schemas["PpoConfig"]["properties"]), keys(&ppo));
+    assert_eq!(keys(&schemas["SacConfig"]["properties"]), keys(&sac));
+    // Every value the document allows for the schedule parses.
+    for value in schemas["PpoConfig"]["properties"]["lr_schedule"]["enum"]
+        .as_array()
+        .expect("lr_schedule enum")
+    {
+        let config = serde_json::json!({ "lr_schedule": value });
+        serde_json::from_value::<crm_api::PpoConfig>(config).expect("a documented schedule");
+    }
+}

@@ -55,6 +55,21 @@ pub struct PpoConfig {
     /// Reward scaling by the running std of the discounted return (SB3 `VecNormalize`), one
     /// factor for both reward parts.
     pub norm_reward: bool,
+    /// How the learning rate falls over the run's steps: the paper's steps (default) or
+    /// CleanRL's linear anneal.
+    pub lr_schedule: LrSchedule,
+}
+
+/// The learning rate's course over a run (see [`PpoConfig::learning_rate_at`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LrSchedule {
+    /// The paper's steps: 100% for the first 40% of the steps, 90% until 70%, 80% after
+    /// (section V-B-2).
+    #[default]
+    Paper,
+    /// Linear to zero at the run's last step: CleanRL's `anneal_lr` (its default for PPO).
+    Linear,
 }
 
 impl Default for PpoConfig {
@@ -77,20 +92,24 @@ impl Default for PpoConfig {
             init_log_std: 0.0,
             norm_obs: true,
             norm_reward: true,
+            lr_schedule: LrSchedule::Paper,
         }
     }
 }
 
 impl PpoConfig {
-    /// The learning rate at a point of training (`progress` in `[0, 1]`): the paper's 100%
-    /// for the first 40%, 90% until 70%, and 80% for the rest (section V-B-2).
+    /// The learning rate at a point of training (`progress` in `[0, 1]`, the share of the
+    /// run's steps done once the rollout being learned from was collected), per
+    /// [`LrSchedule`]: the paper's 100% for the first 40%, 90% until 70%, and 80% for the rest
+    /// (section V-B-2); or `1 - progress` of it (CleanRL's `anneal_lr`, which computes its
+    /// fraction before the rollout, so its last update keeps `1 / iterations` where ours
+    /// takes none).
     pub fn learning_rate_at(&self, progress: f64) -> f64 {
-        let factor = if progress < 0.4 {
-            1.0
-        } else if progress < 0.7 {
-            0.9
-        } else {
-            0.8
+        let factor = match self.lr_schedule {
+            LrSchedule::Paper if progress < 0.4 => 1.0,
+            LrSchedule::Paper if progress < 0.7 => 0.9,
+            LrSchedule::Paper => 0.8,
+            LrSchedule::Linear => (1.0 - progress).clamp(0.0, 1.0),
         };
         self.learning_rate * factor
     }
@@ -284,6 +303,21 @@ mod tests {
         assert!((config.learning_rate_at(0.69) - 2.7e-5).abs() < 1e-12);
         assert!((config.learning_rate_at(0.7) - 2.4e-5).abs() < 1e-12);
         assert!((config.learning_rate_at(1.0) - 2.4e-5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_linear_schedule_anneals_to_zero_and_is_read_from_json() {
+        let config: PpoConfig =
+            serde_json::from_str(r#"{"learning_rate": 3e-4, "lr_schedule": "linear"}"#)
+                .expect("a linear schedule parses");
+        assert_eq!(config.lr_schedule, LrSchedule::Linear);
+        assert_eq!(config.learning_rate_at(0.0), 3e-4);
+        assert!((config.learning_rate_at(0.25) - 2.25e-4).abs() < 1e-12);
+        assert_eq!(config.learning_rate_at(1.0), 0.0);
+        let err = serde_json::from_str::<PpoConfig>(r#"{"lr_schedule": "cosine"}"#)
+            .expect_err("an unknown schedule is refused")
+            .to_string();
+        assert!(err.contains("cosine"), "{err}");
     }
 
     #[test]

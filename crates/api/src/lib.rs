@@ -14,7 +14,7 @@ pub mod worlds;
 
 pub use catalog::Catalog;
 pub use checkpoint::{CheckpointError, CheckpointInfo};
-pub use config::{ConfigError, PpoConfig, SacConfig};
+pub use config::{ConfigError, LrSchedule, PpoConfig, SacConfig};
 pub use imitation::ImitationSpec;
 pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, ObjectiveMode, Row, TrainSpec};
 pub use record::RecordSpec;

@@ -25,9 +25,7 @@ fn main() -> anyhow::Result<()> {
     let world = World::load(Path::new(dir)).with_context(|| format!("loading {dir}"))?;
     let benchmark = world.benchmark.clone();
     let task = benchmark
-        .tasks
-        .iter()
-        .position(|t| &t.id == id)
+        .task_index(id)
         .with_context(|| format!("no task {id:?} in {dir}"))?;
     let object = benchmark.object_of(&benchmark.tasks[task]);
     let part = object

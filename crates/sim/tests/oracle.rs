@@ -8,7 +8,7 @@ use grasp_sim::spec::grasping_machine;
 use grasp_sim::{Benchmark, GraspEnv, SimConfig, TaskChoice};
 
 fn task_index(benchmark: &Benchmark, id: &str) -> usize {
-    benchmark.tasks.iter().position(|t| t.id == id).expect(id)
+    benchmark.task_index(id).expect(id)
 }
 
 /// The outcome and the simulated seconds of one oracle episode.

@@ -9,7 +9,7 @@ use grasp_sim::spec::grasping_machine;
 use grasp_sim::{Benchmark, GraspEnv, Protocol, SimConfig, TaskChoice};
 
 fn task_index(benchmark: &Benchmark, id: &str) -> usize {
-    benchmark.tasks.iter().position(|t| t.id == id).expect(id)
+    benchmark.task_index(id).expect(id)
 }
 
 #[test]

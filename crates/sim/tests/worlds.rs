@@ -37,12 +37,7 @@ fn load(root: &Path) -> World {
 /// settle; returns each of its joints' (angle, expected angle).
 fn index_angles(world: &World, task: &str, command: f32) -> Vec<(f32, f32)> {
     let mut env = GraspEnv::new(world.benchmark.clone(), SimConfig::deterministic());
-    let task = world
-        .benchmark
-        .tasks
-        .iter()
-        .position(|t| t.id == task)
-        .expect("task");
+    let task = world.benchmark.task_index(task).expect("task");
     env.reset_task(task, 3).expect("reset");
     for _ in 0..10 {
         env.step_action(&[0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0])

@@ -184,9 +184,7 @@ pub fn read_json<T: serde::de::DeserializeOwned + Default>(
 /// The index of a task by id, or a message naming the flag and pointing at `crm tasks`.
 pub fn task_index(benchmark: &Benchmark, id: &str) -> anyhow::Result<usize> {
     benchmark
-        .tasks
-        .iter()
-        .position(|t| t.id == id)
+        .task_index(id)
         .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))
 }
 

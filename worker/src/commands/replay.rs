@@ -65,11 +65,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     let benchmark = args.env.benchmark()?;
-    let task = benchmark
-        .tasks
-        .iter()
-        .position(|t| t.id == args.task)
-        .with_context(|| format!("--task: unknown task {:?} (see `crm tasks`)", args.task))?;
+    let task = super::task_index(&benchmark, &args.task)?;
     let machine = args.env.machine()?;
     let mut grasp = GraspEnv::new(benchmark, args.env.config());
     grasp.set_task_choice(grasp_sim::TaskChoice::Fixed(task))?;

@@ -204,11 +204,7 @@ mod tests {
     fn the_oracles_successful_episodes_are_the_demonstrations_and_noise_moves_the_states() {
         let benchmark = Arc::new(Benchmark::builtin());
         let machine = crm::Machine::from_spec(grasp_sim::spec::grasping_spec()).expect("machine");
-        let task = benchmark
-            .tasks
-            .iter()
-            .position(|t| t.id == "mouse-press")
-            .expect("task");
+        let task = benchmark.task_index("mouse-press").expect("task");
         let choice = EnvChoice {
             tasks: TaskChoice::Fixed(task),
             topologies: None,

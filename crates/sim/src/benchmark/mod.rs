@@ -155,6 +155,11 @@ impl Benchmark {
         self.tasks.iter().find(|t| t.id == id)
     }
 
+    /// The index of the task with this id (what `TaskChoice::Fixed` takes).
+    pub fn task_index(&self, id: &str) -> Option<usize> {
+        self.tasks.iter().position(|t| t.id == id)
+    }
+
     /// The object a task refers to (validated to exist).
     pub fn object_of(&self, task: &Task) -> &Object {
         self.object(&task.object)
@@ -294,5 +299,21 @@ impl Benchmark {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_task_is_found_by_its_id() {
+        let benchmark = Benchmark::builtin();
+        let index = benchmark
+            .task_index("mouse-press")
+            .expect("a built-in task");
+        assert_eq!(benchmark.tasks[index].id, "mouse-press");
+        assert_eq!(benchmark.task("mouse-press"), Some(&benchmark.tasks[index]));
+        assert_eq!(benchmark.task_index("no-such-task"), None);
     }
 }
