@@ -198,6 +198,27 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
             r#"{"kind": "eval", "checkpoint_id": 1, "hold_s": 60}"#,
             "hold_s",
         ),
+        // One f64 step past a bound (schemathesis's find: an f32 field read 8 for this).
+        (
+            r#"{"kind": "train", "algorithm": "ppo", "steps": 1, "hold_s": 8.000000000000002}"#,
+            "hold_s",
+        ),
+        (
+            r#"{"kind": "eval", "checkpoint_id": 1, "hold_s": 0.09999999999999999}"#,
+            "hold_s",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "lppo", "steps": 10, "config": {"gamma": 1.0000000000000002}}"#,
+            "config.gamma",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-sac", "steps": 10, "sac": {"early_stop_success": 1.0000000000000002}}"#,
+            "sac.early_stop_success",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "noise": 1.0000000000000002}}"#,
+            "imitation.noise",
+        ),
         (r#"{"kind": "fly"}"#, "kind"),
         ("not json", "body"),
     ];

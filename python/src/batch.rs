@@ -19,7 +19,7 @@ pub struct Options {
     pub randomize: bool,
     pub reward_mode: RewardMode,
     /// Seconds of steady hold the judge asks (default: the paper's 5 s).
-    pub hold_s: Option<f32>,
+    pub hold_s: Option<f64>,
 }
 
 /// A `GraspEnv` that keeps the global observation and the events of its last step, which the
@@ -145,7 +145,7 @@ impl Batch {
         };
         config.protocol = options.protocol;
         if let Some(hold) = options.hold_s {
-            config.hold_s = hold;
+            config.hold_s = hold as f32;
         }
         let machine = world.machine().map_err(|e| format!("world: {e}"))?;
         let slots = (0..count)

@@ -82,7 +82,7 @@ impl NativeBatch {
         objective: &str,
         randomize: bool,
         reward_mode: &str,
-        hold_s: Option<f32>,
+        hold_s: Option<f64>,
         world: Option<std::path::PathBuf>,
     ) -> PyResult<Self> {
         if num_envs == 0 {

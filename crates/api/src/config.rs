@@ -1,4 +1,8 @@
 //! PPO configuration with the paper's defaults (section V-B-2) and CleanRL's names.
+//!
+//! Every real-valued setting is an `f64`, as JSON gives it, so a bound is checked on the
+//! value sent (`1.0000000000000002` is not a `gamma` of 1, as an `f32` would read it); the
+//! learners compute in `f32` and convert where they read a setting.
 
 /// A configuration value out of its domain; names the field.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -17,19 +21,18 @@ pub struct PpoConfig {
     /// Initial learning rate. Paper V-B-2: 3e-5.
     pub learning_rate: f64,
     /// Discount. Paper V-B-2: 0.99.
-    pub gamma: f32,
+    pub gamma: f64,
     /// GAE lambda. Paper V-B-2: 0.95.
-    pub gae_lambda: f32,
+    pub gae_lambda: f64,
     /// Minibatch size. Paper V-B-2: "a batch size of 64".
     pub minibatch_size: usize,
     /// Surrogate clip range epsilon. Not given in the paper; 0.2, stable-baselines3's default,
-    /// which the authors' code used. (`f64` so a tiny JSON value is checked as given; the
-    /// learner uses it as `f32`.)
+    /// which the authors' code used.
     pub clip_coef: f64,
     /// Entropy bonus coefficient. Not given in the paper; 0.0, stable-baselines3's default.
-    pub ent_coef: f32,
+    pub ent_coef: f64,
     /// Value loss coefficient. Not given in the paper; 0.5, stable-baselines3's default.
-    pub vf_coef: f32,
+    pub vf_coef: f64,
     /// Gradient norm clip, applied to the actor's and the critic's gradients separately (so
     /// the value loss cannot shrink the policy's step). Not given in the paper; 0.5,
     /// stable-baselines3's and CleanRL's value.
@@ -42,14 +45,14 @@ pub struct PpoConfig {
     pub hidden: Vec<usize>,
     /// Early stop when the last `early_stop_window` episodes succeed at this rate or more.
     /// Paper V-B-2: 99% over the most recent 100 episodes.
-    pub early_stop_success: f32,
+    pub early_stop_success: f64,
     pub early_stop_window: usize,
     /// KL guard: an update stops its epochs at the first minibatch whose approximate KL
     /// exceeds 1.5 x this (stable-baselines3's `target_kl` rule); 0 turns it off. 0.02, our
     /// value (SB3 leaves the guard off by default).
-    pub target_kl: f32,
+    pub target_kl: f64,
     /// Initial log standard deviation of the policy. CleanRL's continuous PPO: 0.
-    pub init_log_std: f32,
+    pub init_log_std: f64,
     /// Running observation normalization (SB3 `VecNormalize`, which the authors used).
     pub norm_obs: bool,
     /// Reward scaling by the running std of the discounted return (SB3 `VecNormalize`), one
@@ -179,9 +182,9 @@ fn bad(field: &'static str, message: &str) -> Result<(), ConfigError> {
 /// The settings PPO and SAC share, checked alike.
 struct Common<'a> {
     learning_rate: f64,
-    gamma: f32,
+    gamma: f64,
     hidden: &'a [usize],
-    early_stop_success: f32,
+    early_stop_success: f64,
     early_stop_window: usize,
 }
 
@@ -216,7 +219,7 @@ pub struct SacConfig {
     /// Adam learning rate of the actor, the critics and the temperature. sb3: 3e-4.
     pub learning_rate: f64,
     /// Discount. Paper V-B-2 (as for PPO): 0.99.
-    pub gamma: f32,
+    pub gamma: f64,
     /// Polyak factor of the target critics. sb3: 0.005.
     pub tau: f64,
     /// Minibatch size. sb3: 256.
@@ -233,9 +236,9 @@ pub struct SacConfig {
     /// Hidden layer widths of the actor and each critic. sb3: [256, 256].
     pub hidden: Vec<usize>,
     /// Target entropy per live action dimension (automatic temperature tuning). sb3: -1.
-    pub target_entropy_per_dim: f32,
+    pub target_entropy_per_dim: f64,
     /// Early stop as for PPO. Paper V-B-2: 99% over the most recent 100 episodes.
-    pub early_stop_success: f32,
+    pub early_stop_success: f64,
     pub early_stop_window: usize,
     /// Running observation normalization per stage and feature, as for PPO (SB3
     /// `VecNormalize`, which the authors used; SB3's replay buffer stores raw observations

@@ -24,7 +24,7 @@ pub struct ImitationSpec {
     /// Standard deviation of Gaussian noise on the oracle's executed actions, in action units;
     /// the labels stay clean (DART, Laskey et al., 2017). 0: none.
     #[serde(default)]
-    pub noise: f32,
+    pub noise: f64,
 }
 
 fn default_epochs() -> usize {

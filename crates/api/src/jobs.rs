@@ -133,15 +133,15 @@ pub struct TrainSpec {
     /// grasps) but does not teach grasps that last 5 s: a first phase, not a recipe
     /// (docs/LEARNING.md). Evaluations ask 5 s unless they say otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub hold_s: Option<f32>,
+    pub hold_s: Option<f64>,
 }
 
 /// Shortest and longest steady hold (s) a job may ask: at least a few control steps, and room
 /// for the arm's lift inside its 10 s execution.
-pub const HOLD_S_RANGE: (f32, f32) = (0.1, 8.0);
+pub const HOLD_S_RANGE: (f64, f64) = (0.1, 8.0);
 
 /// Checks a job's `hold_s`: absent, or seconds within [`HOLD_S_RANGE`].
-pub fn check_hold_s(hold_s: Option<f32>) -> Result<(), String> {
+pub fn check_hold_s(hold_s: Option<f64>) -> Result<(), String> {
     let (low, high) = HOLD_S_RANGE;
     match hold_s {
         Some(h) if !(low..=high).contains(&h) => Err(format!(
@@ -194,7 +194,7 @@ pub struct EvalSpec {
     /// Seconds of steady hold the judge asks of hold tasks (see [`check_hold_s`]); absent:
     /// the paper's 5 s (section V-B-2).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub hold_s: Option<f32>,
+    pub hold_s: Option<f64>,
 }
 
 fn default_episodes() -> u64 {
@@ -351,7 +351,7 @@ pub struct EvalReport {
     /// The steady hold (s) the judge asked when the evaluation set one; absent: the
     /// paper's 5 s.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub hold_s: Option<f32>,
+    pub hold_s: Option<f64>,
     /// The share the authors' judge would have passed ([`Row::authors_judge`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub authors_judge: Option<f64>,
@@ -462,7 +462,15 @@ mod tests {
         assert_eq!(eval.hold_s, None);
         assert!(check_hold_s(None).is_ok());
         assert!(check_hold_s(Some(1.0)).is_ok());
-        for bad in [0.0, 0.05, 8.5, f32::NAN, -1.0] {
+        for bad in [
+            0.0,
+            0.05,
+            8.5,
+            8.000000000000002,
+            0.09999999999999999,
+            f64::NAN,
+            -1.0,
+        ] {
             assert!(check_hold_s(Some(bad)).is_err(), "{bad}");
         }
         // Curriculum: off unless asked, and not written out when off.

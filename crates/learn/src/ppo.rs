@@ -70,10 +70,10 @@ impl Ppo {
     pub fn new(layout: Layout, config: PpoConfig, seed: u64) -> Result<Self> {
         config.validate()?;
         let net = ActorCritic::new(layout, &config.hidden, seed)?;
-        net.set_log_std(config.init_log_std)?;
+        net.set_log_std(config.init_log_std as f32)?;
         let optimizer = Adam::new(net.params(), config.learning_rate);
         Ok(Self {
-            scaler: RewardScaler::new(config.gamma),
+            scaler: RewardScaler::new(config.gamma as f32),
             net,
             config,
             optimizer,
@@ -177,7 +177,11 @@ impl Ppo {
                 last: rollout.last[t],
             })
             .collect();
-        let (mut advantages, returns) = gae(&records, self.config.gamma, self.config.gae_lambda);
+        let (mut advantages, returns) = gae(
+            &records,
+            self.config.gamma as f32,
+            self.config.gae_lambda as f32,
+        );
         // Normalized once over the rollout (CleanRL and SB3 do it per minibatch; with
         // minibatches of hundreds the two differ only by sampling noise).
         if n > 1 {
@@ -225,7 +229,8 @@ impl Ppo {
                     .map(|c| c.narrow(0, start, len))
                     .collect::<candle_core::Result<Vec<_>>>()?;
                 let kl = self.minibatch(&batch, &mut stats)?;
-                if self.config.target_kl > 0.0 && kl > 1.5 * self.config.target_kl {
+                let target_kl = self.config.target_kl as f32;
+                if target_kl > 0.0 && kl > 1.5 * target_kl {
                     break 'epochs;
                 }
             }
@@ -264,8 +269,8 @@ impl Ppo {
         let policy_loss = unclipped.minimum(&clipped)?.mean_all()?.neg()?;
         let value_loss = (self.net.value(input)? - returns)?.sqr()?.mean_all()?;
         let entropy = self.net.entropy(masks)?.mean_all()?;
-        let loss = ((&policy_loss + (&value_loss * f64::from(self.config.vf_coef))?)?
-            - (&entropy * f64::from(self.config.ent_coef))?)?;
+        let loss = ((&policy_loss + (&value_loss * self.config.vf_coef)?)?
+            - (&entropy * self.config.ent_coef)?)?;
         let grads = loss.backward()?;
         let stepped = Instant::now();
         stats.timing.forward_backward += (stepped - started).as_secs_f64();

@@ -395,8 +395,7 @@ impl Sac {
             &next_action,
         )?;
         let soft = (next_q - next_log_prob.broadcast_mul(&alpha)?)?;
-        let target =
-            (rewards + (alive * soft)?.affine(f64::from(self.config.gamma), 0.0)?)?.detach();
+        let target = (rewards + (alive * soft)?.affine(self.config.gamma, 0.0)?)?.detach();
         let q1 = SacNets::q(&self.nets.q1, &input, &actions)?;
         let q2 = SacNets::q(&self.nets.q2, &input, &actions)?;
         let critic_loss =
@@ -413,7 +412,7 @@ impl Sac {
 
         // Temperature: keep the entropy near the target for the live dimensions.
         let live = masks.sum(D::Minus1)?;
-        let target_entropy = live.affine(f64::from(self.config.target_entropy_per_dim), 0.0)?;
+        let target_entropy = live.affine(self.config.target_entropy_per_dim, 0.0)?;
         let gap = (log_prob.detach() + target_entropy)?;
         let alpha_loss =
             (self.nets.log_alpha.as_tensor().broadcast_mul(&gap)? * -1.0)?.mean_all()?;

@@ -51,15 +51,15 @@ pub struct EnvArgs {
     /// teach grasps that last 5 s (docs/LEARNING.md); evaluate with the default to report the
     /// paper's test.
     #[arg(long, value_name = "SECONDS", value_parser = parse_hold_s)]
-    pub hold_s: Option<f32>,
+    pub hold_s: Option<f64>,
     /// The world, read once.
     #[arg(skip)]
     loaded: Arc<OnceLock<World>>,
 }
 
 /// `--hold-s`: seconds within [`crm_api::jobs::HOLD_S_RANGE`].
-fn parse_hold_s(text: &str) -> Result<f32, String> {
-    let hold: f32 = text
+fn parse_hold_s(text: &str) -> Result<f64, String> {
+    let hold: f64 = text
         .parse()
         .map_err(|_| format!("{text:?} is not a number of seconds"))?;
     crm_api::jobs::check_hold_s(Some(hold))?;
@@ -140,7 +140,7 @@ impl EnvArgs {
     /// The world's settings with the protocol of `objective` and, when given, `hold_s`
     /// seconds of steady hold (a job's; the CLI commands copy `--hold-s` into their spec),
     /// else the paper's 5 s.
-    pub fn config_for(&self, objective: ObjectiveMode, hold_s: Option<f32>) -> SimConfig {
+    pub fn config_for(&self, objective: ObjectiveMode, hold_s: Option<f64>) -> SimConfig {
         let mut config = if self.no_randomization {
             SimConfig::deterministic()
         } else {
@@ -157,7 +157,7 @@ impl EnvArgs {
         };
         config.protocol = protocol(objective);
         if let Some(hold) = hold_s {
-            config.hold_s = hold;
+            config.hold_s = hold as f32;
         }
         config.finger_actions = match self.finger_actions {
             FingerMode::Signed => grasp_sim::FingerActions::Signed,

@@ -61,7 +61,7 @@ pub struct TrainArgs {
     /// Noise (standard deviation, in action units) on the oracle's executed actions while
     /// it demonstrates; the labels stay clean (DART).
     #[arg(long, default_value_t = 0.0)]
-    pub bc_noise: f32,
+    pub bc_noise: f64,
     /// Learning rate of behaviour cloning.
     #[arg(long, default_value_t = 1e-3)]
     pub bc_learning_rate: f64,

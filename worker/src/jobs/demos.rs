@@ -160,7 +160,7 @@ pub fn imitate(
         machine: &machine,
         choice: &choice,
         seed: spec.seed.wrapping_mul(7_919).wrapping_add(1 << 32),
-        noise: imitation.noise,
+        noise: imitation.noise as f32,
     };
     let total = imitation.episodes;
     let collected = oracle_demos_with(&source, total, |done| phase(PHASE_DEMOS, done, total))?;

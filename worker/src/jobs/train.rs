@@ -185,7 +185,7 @@ impl Trainer {
             tasks: TaskCurriculum::new(benchmark.tasks.len()),
             task_ids: benchmark.tasks.iter().map(|t| t.id.clone()).collect(),
             curriculum: spec.curriculum,
-            early_stop: EarlyStop::new(window, threshold),
+            early_stop: EarlyStop::new(window, threshold as f32),
             last_100: EarlyStop::new(100, 1.0),
             spec,
             envs,
