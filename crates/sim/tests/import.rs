@@ -192,6 +192,96 @@ fn fingers_behind_a_chain_of_fixed_links_hold_their_pose_while_the_arm_moves() {
     }
 }
 
+#[test]
+fn a_relaxed_hand_takes_its_preshape_at_the_preshape_speed_once_the_grasp_begins() {
+    // The stand-in approaches relaxed, as the SVH does; in the grasp stage each finger's
+    // command moves toward the topology's preshape by at most the preshape speed's share
+    // of a control step (the authors' 1 rad/s), and gets there; at speed 0 at once.
+    use crm::Environment;
+    let copy = standin("ramp");
+    let world_dir = out("ramp");
+    import(&copy, &world_dir, &Options::default()).expect("imports");
+    let world = World::load_with(&world_dir, &Assets::default()).expect("loads");
+    for speed in [1.0, 0.0] {
+        let config = SimConfig {
+            preshape_speed: speed,
+            ..SimConfig::deterministic()
+        };
+        let most = speed * config.control_dt();
+        let mut env = GraspEnv::new(world.benchmark.clone(), config);
+        env.reset_task(0, 1).expect("reset");
+        let shape = env.hand_shape();
+        let relaxed = env.scene().expect("scene").hand.commands;
+        assert!(
+            (0..5).any(|f| (relaxed[f] - shape[f].preshape).abs() > 2.0 * most),
+            "the stand-in's relaxed pose {relaxed:?} is its preshape"
+        );
+        env.set_stage("grasp");
+        let mut before = relaxed;
+        let mut steps = 0;
+        loop {
+            env.step_action(&[0.0; 8]).expect("step");
+            steps += 1;
+            let now = env.scene().expect("scene").hand.commands;
+            for f in 0..5 {
+                let moved = (now[f] - before[f]).abs();
+                let toward =
+                    (now[f] - shape[f].preshape).abs() <= (before[f] - shape[f].preshape).abs();
+                assert!(toward, "finger {f}: {} -> {}", before[f], now[f]);
+                if speed > 0.0 {
+                    assert!(
+                        moved <= most + 1e-6,
+                        "finger {f} moved {moved} rad in a step"
+                    );
+                }
+            }
+            before = now;
+            let there = |f: usize| {
+                now[f] == shape[f].preshape || (shape[f].active && now[f] >= shape[f].preshape)
+            };
+            if (0..5).all(there) {
+                break;
+            }
+            assert!(steps < 200, "not preshaped after {steps} steps: {now:?}");
+        }
+        if speed > 0.0 {
+            assert!(steps > 1, "preshaped in one step at {speed} rad/s");
+        } else {
+            assert_eq!(steps, 1, "at speed 0 the preshape is taken at once");
+        }
+    }
+    // Fingers the policy closes while the hand is on its way are never opened by it.
+    let config = SimConfig::deterministic();
+    let mut env = GraspEnv::new(world.benchmark.clone(), config);
+    env.reset_task(0, 1).expect("reset");
+    let shape = env.hand_shape();
+    assert!(shape.iter().any(|f| f.active), "task 0 moves no finger");
+    env.set_stage("grasp");
+    let mut before = env.scene().expect("scene").hand.commands;
+    for k in 0..20 {
+        // Closing, then still: neither may open them.
+        let close = if k < 8 { 1.0 } else { 0.0 };
+        env.step_action(&[0.0, 0.0, 0.0, close, close, close, close, close])
+            .expect("step");
+        let now = env.scene().expect("scene").hand.commands;
+        for f in (0..5).filter(|&f| shape[f].active) {
+            assert!(
+                now[f] >= before[f],
+                "finger {f} opened: {} -> {}",
+                before[f],
+                now[f]
+            );
+        }
+        before = now;
+    }
+    for f in (0..5).filter(|&f| shape[f].active) {
+        assert!(
+            before[f] > shape[f].preshape,
+            "finger {f} did not close past its preshape"
+        );
+    }
+}
+
 fn refusal(copy: &Path, tag: &str) -> (String, PathBuf) {
     let dir = out(tag);
     let message = import(copy, &dir, &Options::default())

@@ -111,6 +111,7 @@ impl GraspEnv {
             let action = objective_action(self, hold);
             let delta = Vec3::new(action[0], action[1], action[2]) * GRASP_SCALE;
             let fingers: [f32; 5] = std::array::from_fn(|f| action[3 + f] * FINGER_SCALE);
+            self.preshape_step()?;
             self.move_fingers(&fingers)?;
             events = self.advance(delta)?;
             physics += self.config.substeps.max(1);

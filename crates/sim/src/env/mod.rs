@@ -53,6 +53,9 @@ pub struct GraspEnv {
     parts: ObservationParts,
     last_fail: Option<FailCause>,
     mount_target: Vec3,
+    /// Whether a relaxed hand is still on its way to the preshape (see
+    /// [`SimConfig::preshape_speed`]).
+    preshaping: bool,
 }
 
 impl GraspEnv {
@@ -76,6 +79,7 @@ impl GraspEnv {
             task_weights: None,
             last_fail: None,
             mount_target: Vec3::ZERO,
+            preshaping: false,
         }
     }
 
@@ -275,6 +279,7 @@ impl GraspEnv {
         self.sim_steps = 0;
         self.executed = false;
         self.authors_judge = false;
+        self.preshaping = false;
         self.last_fail = None;
         self.hand_contacts = ContactMetrics::default();
         self.observe(&ContactMetrics::default())?;
@@ -340,6 +345,7 @@ impl GraspEnv {
             if closing { step.abs() } else { step }
         });
         self.clipped += clipped;
+        self.preshape_step()?;
         self.move_fingers(&fingers)?;
         let mut events = self.advance(delta)?;
         self.steps += 1;
@@ -360,15 +366,48 @@ impl GraspEnv {
             && self.config.protocol == Protocol::Scripted
     }
 
-    /// Adds increments (rad) to the active fingers' commands, within the topology's
-    /// preshape and the joints' range.
+    /// Moves the fingers' commands toward the topology's preshape by at most one control
+    /// step at [`SimConfig::preshape_speed`], while a relaxed hand is on its way there. A
+    /// finger the topology moves is never opened: once the policy has closed it to or past
+    /// the preshape it is there.
+    fn preshape_step(&mut self) -> Result<()> {
+        if !self.preshaping {
+            return Ok(());
+        }
+        let shape = self.hand_shape();
+        let most = self.config.preshape_speed * self.config.control_dt();
+        let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
+        let mut arrived = true;
+        for (finger, shape) in shape.iter().enumerate() {
+            let command = scene.hand.commands[finger];
+            let gap = shape.preshape - command;
+            if gap > 0.0 || (gap < 0.0 && !shape.active) {
+                let next = if gap.abs() <= most {
+                    shape.preshape
+                } else {
+                    command + most.copysign(gap)
+                };
+                scene.hand.set_command(&mut scene.world, finger, next);
+                arrived &= next == shape.preshape;
+            }
+        }
+        self.preshaping = !arrived;
+        Ok(())
+    }
+
+    /// Adds increments (rad) to the active fingers' commands, within the joints' range and
+    /// not below the topology's preshape (or below where a relaxed hand on its way there
+    /// stands).
     fn move_fingers(&mut self, increments: &[f32; 5]) -> Result<()> {
         let shape = self.hand_shape();
         let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
         for (finger, &step) in increments.iter().enumerate() {
             if shape[finger].active && step != 0.0 {
-                let command = (scene.hand.commands[finger] + step)
-                    .clamp(shape[finger].preshape, scene.hand.model.max_command(finger));
+                let current = scene.hand.commands[finger];
+                let command = (current + step).clamp(
+                    shape[finger].preshape.min(current),
+                    scene.hand.model.max_command(finger),
+                );
                 scene.hand.set_command(&mut scene.world, finger, command);
             }
         }
@@ -529,11 +568,18 @@ impl crm::Environment for GraspEnv {
     }
 
     fn set_stage(&mut self, stage: &str) {
-        // A hand that approaches relaxed takes its topology's preshape as the grasp begins.
+        // A hand that approaches relaxed takes its topology's preshape as the grasp begins,
+        // at the preshape speed (or at once).
         if stage == "grasp" && self.stage != "grasp" {
             let shape = self.hand_shape();
+            let relaxed = self
+                .scene
+                .as_ref()
+                .is_some_and(|scene| scene.hand.model.relaxed.is_some());
+            self.preshaping = relaxed && self.config.preshape_speed > 0.0;
             if let Some(scene) = self.scene.as_mut()
-                && scene.hand.model.relaxed.is_some()
+                && relaxed
+                && !self.preshaping
             {
                 for (finger, shape) in shape.iter().enumerate() {
                     scene

@@ -44,7 +44,7 @@ pub struct Profile {
     /// Finger commands held through the approach, by finger name (default: none, so the hand
     /// approaches in its topology's preshape). Where given, the hand takes the preshape when
     /// the grasp stage begins, as the authors' hand does (their `relax` pose, then the
-    /// topology's grasp pose).
+    /// topology's grasp pose), at `SimConfig::preshape_speed`.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub relaxed: BTreeMap<String, f32>,
     /// Joints the paper's action does not move (spread, thumb opposition), held at these
