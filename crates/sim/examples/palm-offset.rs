@@ -6,7 +6,7 @@
 //! default [`SimConfig::preshape_speed`] (0: the preshape at once).
 //!
 //! This is how the handle bottle of the paper's task 7 was found to be graspable once the
-//! palm moves 5-8 cm along world x after arriving (docs/WORLDS.md, "The handle bottle of
+//! palm moves 4-8 cm along world x after arriving (docs/WORLDS.md, "The handle bottle of
 //! `t07`"):
 //!
 //! ```sh
