@@ -183,6 +183,26 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
             "imitation",
         ),
         (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "tasks": ["mug-wrap", "nope"]}}"#,
+            "imitation.tasks[1]",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "shifts": {"nope": [0, 0, 0]}}}"#,
+            "imitation.shifts",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "stages": ["grasp", "success"]}}"#,
+            "imitation.stages",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "shifts": {"mug-wrap": [0.1000000000000001, 0, 0]}}}"#,
+            "imitation.shifts",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "anchor_episodes": 100001}}"#,
+            "imitation.anchor_episodes",
+        ),
+        (
             r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "objective": "telekinesis"}"#,
             "objective",
         ),

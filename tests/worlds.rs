@@ -44,6 +44,27 @@ fn jobs_name_a_world_that_workers_run_and_checkpoints_keep_to() {
     let world_enum =
         &openapi["components"]["schemas"]["EvalRequest"]["properties"]["world"]["enum"];
     assert_eq!(world_enum, &serde_json::json!(["crm", "test-hand", null]));
+    // Every world's task ids name the tasks and the palm shifts a cloning may give.
+    let imitation = &openapi["components"]["schemas"]["ImitationSpec"]["properties"];
+    let ids: Vec<&str> = tasks["tasks"]
+        .as_array()
+        .expect("tasks")
+        .iter()
+        .filter_map(|t| t["id"].as_str())
+        .chain(["mouse-press"])
+        .collect();
+    for id in ids {
+        assert!(
+            imitation["shifts"]["properties"][id]["$ref"].is_string(),
+            "{id}: {imitation}"
+        );
+        assert!(
+            imitation["tasks"]["items"]["enum"]
+                .as_array()
+                .is_some_and(|e| e.iter().any(|v| v == id)),
+            "{id}"
+        );
+    }
 
     // Refusals name the field and store nothing.
     for (body, field) in [

@@ -85,6 +85,23 @@ fn the_documents_task_and_topology_enums_are_the_catalogs() {
             );
         }
     }
+    // A cloning names the same tasks, and its palm shifts are keyed by them.
+    let imitation = &schemas["ImitationSpec"]["properties"];
+    assert_eq!(strings(&imitation["tasks"]["items"]["enum"]), ids);
+    let mut keyed: Vec<String> = imitation["shifts"]["properties"]
+        .as_object()
+        .expect("shifts")
+        .keys()
+        .cloned()
+        .collect();
+    let mut sorted = ids.clone();
+    keyed.sort();
+    sorted.sort();
+    assert_eq!(keyed, sorted);
+    assert_eq!(
+        strings(&imitation["stages"]["items"]["enum"]),
+        crm_api::imitation::STAGES.map(String::from).to_vec()
+    );
 }
 
 #[test]

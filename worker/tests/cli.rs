@@ -451,6 +451,92 @@ fn behaviour_cloning_of_the_oracle_warms_up_a_ppo_policy() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+#[test]
+fn cloning_can_teach_one_task_with_a_palm_shift_while_anchor_states_keep_the_others() {
+    let dir = std::env::temp_dir().join(format!("crm-cli-anchor-{}", std::process::id()));
+    let out = dir.to_string_lossy().to_string();
+    let train = |extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "--algo",
+            "crm-ppo",
+            "--task",
+            "mouse-press",
+            "--task",
+            "stapler-press",
+            "--steps",
+            "64",
+            "--envs",
+            "1",
+            "--bc-episodes",
+            "3",
+            "--out",
+            &out,
+        ];
+        args.extend_from_slice(extra);
+        crm(&args)
+    };
+    let (code, _, stderr) = train(&[
+        "--bc-task",
+        "mouse-press",
+        "--bc-shift",
+        "mouse-press=0,0,0.002",
+        "--bc-stage",
+        "approach",
+        "--bc-stage",
+        "grasp",
+        "--bc-anchor-episodes",
+        "2",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    // Three demonstrations of the mouse, and the stapler's states as anchors.
+    let line = stderr
+        .lines()
+        .find(|l| l.starts_with("behaviour cloning: 3 of 3 oracle episodes succeeded"))
+        .unwrap_or_else(|| panic!("{stderr}"));
+    let anchors: usize = line
+        .split(" steps (")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(anchors > 10, "{line}");
+    // Bad shapes of the cloning are refused naming the flag.
+    for (extra, flag) in [
+        (
+            &["--bc-anchor-episodes", "100001"][..],
+            "--bc-anchor-episodes",
+        ),
+        (&["--bc-stage", "success"][..], "--bc-stage"),
+        (&["--bc-shift", "mouse-press=0.5,0,0"][..], "--bc-shift"),
+        (&["--bc-shift", "nope=0,0,0"][..], "imitation.shifts"),
+        (&["--bc-task", "nope"][..], "imitation.tasks"),
+    ] {
+        let (code, _, stderr) = train(extra);
+        assert_eq!(code, 2, "{extra:?}: {stderr}");
+        assert!(stderr.contains(flag), "{extra:?}: {stderr}");
+    }
+    // The oracle takes the same shift; an unknown task is named.
+    let report = crm_json(&[
+        "oracle",
+        "--task",
+        "mouse-press",
+        "--seeds",
+        "1",
+        "--shift",
+        "mouse-press=0,0,0.002",
+        "--json",
+    ]);
+    assert_eq!(report["episodes"], 1, "{report}");
+    let (code, _, stderr) = crm(&["oracle", "--shift", "nope=0,0,0", "--seeds", "1"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--shift") && stderr.contains("nope"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Success rate of `crm eval` on box-lift (20 deterministic episodes).
 /// Runs `crm` with `args`, which must succeed, and parses its one JSON object.
 fn crm_json(args: &[&str]) -> serde_json::Value {

@@ -15,6 +15,6 @@ pub mod worlds;
 pub use catalog::Catalog;
 pub use checkpoint::{CheckpointError, CheckpointInfo};
 pub use config::{ConfigError, LrSchedule, PpoConfig, SacConfig};
-pub use imitation::ImitationSpec;
+pub use imitation::{ImitationSpec, parse_shift};
 pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, ObjectiveMode, Row, TrainSpec};
 pub use record::RecordSpec;

@@ -2,7 +2,10 @@
 //! can grasp. It moves to the task's grasp location along the hand's approach axis (from
 //! above for a palm that faces down), closes to the topology's shape while regulating the
 //! grip under the object's force limit, then performs the objective with the arm's
-//! controllers of `script.rs`. Under the paper's protocol the
+//! controllers of `script.rs`. An oracle given a palm shift ([`Oracle::with_shift`]) first
+//! moves the palm that far from the grasp location in the grasp stage, for a task whose
+//! grasp holds only off the point it arrives at (docs/WORLDS.md, "The handle bottle of
+//! `t07`"). Under the paper's protocol the
 //! environment runs those controllers itself once the grasp is ready, inside the step that
 //! made it ready.
 
@@ -36,7 +39,15 @@ pub struct Oracle {
     /// Whether the hand has lined up with the grasp location in the approach (it then goes
     /// straight in, and does not back off again).
     lined_up: bool,
+    /// Where the palm goes in the grasp stage before closing, from the grasp location (m,
+    /// world frame).
+    shift: Vec3,
 }
+
+/// Largest palm shift an oracle takes (m per axis), as the job API bounds it
+/// (`crm_api::imitation::MAX_SHIFT`): a shift corrects a grasp location by a few centimetres
+/// (`t07`'s is 6 cm in all), not a new grasp.
+pub const MAX_SHIFT: f32 = 0.1;
 
 impl Default for Oracle {
     fn default() -> Self {
@@ -55,6 +66,16 @@ impl Oracle {
             phase_steps: 0,
             settled: 0,
             lined_up: false,
+            shift: Vec3::ZERO,
+        }
+    }
+
+    /// An oracle that moves the palm by `shift` (m, world frame, each axis within
+    /// [`MAX_SHIFT`]) from the grasp location once it has arrived, before it closes.
+    pub fn with_shift(shift: [f32; 3]) -> Self {
+        Self {
+            shift: Vec3::from(shift).clamp(Vec3::splat(-MAX_SHIFT), Vec3::splat(MAX_SHIFT)),
+            ..Self::new()
         }
     }
 
@@ -98,11 +119,16 @@ impl Oracle {
         let wanted_grip = crate::script::wanted_grip(env);
         match self.phase {
             Phase::Align => {
-                action[0] = unit(rel[0], GRASP_SCALE);
-                action[1] = unit(rel[1], GRASP_SCALE);
-                action[2] = unit(rel[2], GRASP_SCALE);
-                let close_enough = rel.iter().all(|r| r.abs() < 0.003);
-                if close_enough || self.phase_steps > 10 {
+                // `rel` is the grasp location minus the palm: the palm heads for the grasp
+                // location plus the shift, at most one grasp step per axis and control step.
+                let goal = Vec3::from(rel) + self.shift;
+                action[0] = unit(goal.x, GRASP_SCALE);
+                action[1] = unit(goal.y, GRASP_SCALE);
+                action[2] = unit(goal.z, GRASP_SCALE);
+                let close_enough = goal.abs().max_element() < 0.003;
+                // Ten steps to settle, and the steps a shift takes at full speed.
+                let allowed = 10 + (self.shift.abs().max_element() / GRASP_SCALE).ceil() as usize;
+                if close_enough || self.phase_steps > allowed {
                     self.enter(if task.objective == Objective::Press {
                         Phase::Act
                     } else {
@@ -170,11 +196,22 @@ pub fn run_episode(
     task: usize,
     seed: u64,
 ) -> crate::Result<(OracleEpisode, GraspEnv)> {
+    run_shifted_episode(env, machine, task, seed, [0.0; 3])
+}
+
+/// [`run_episode`] with the palm shifted by `shift` before the grasp ([`Oracle::with_shift`]).
+pub fn run_shifted_episode(
+    env: GraspEnv,
+    machine: crm::Machine,
+    task: usize,
+    seed: u64,
+    shift: [f32; 3],
+) -> crate::Result<(OracleEpisode, GraspEnv)> {
     let mut env = env;
     env.set_task_choice(crate::TaskChoice::Fixed(task))?;
     let mut crm_env = crm::CrmEnv::new(machine, env, crm::RewardMode::Crm);
     let (mut stage, _) = crm_env.reset(seed)?;
-    let mut oracle = Oracle::new();
+    let mut oracle = Oracle::with_shift(shift);
     let mut steps = 0;
     let outcome = loop {
         let name = crm_env.machine().stage_name(stage).to_string();

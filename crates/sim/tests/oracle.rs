@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use grasp_sim::oracle::run_episode;
+use grasp_sim::oracle::{Oracle, run_episode};
 use grasp_sim::spec::grasping_machine;
 use grasp_sim::{Benchmark, GraspEnv, SimConfig, TaskChoice};
 
@@ -54,4 +54,39 @@ fn a_hand_that_does_nothing_never_succeeds() {
         }
     }
     assert_eq!(crm_env.episode().history().len(), 0);
+}
+
+#[test]
+fn an_oracle_with_a_palm_shift_moves_the_palm_that_far_from_the_grasp_location_before_closing() {
+    let benchmark = Arc::new(Benchmark::builtin());
+    let task = task_index(&benchmark, "box-lift");
+    // Where the palm stands, against the grasp location, when the oracle first closes a
+    // finger (the shift takes 4 control steps at 3 mm a step).
+    let relative_after_aligning = |shift: [f32; 3]| {
+        let mut env = GraspEnv::new(benchmark.clone(), SimConfig::deterministic());
+        env.set_task_choice(TaskChoice::Fixed(task)).expect("task");
+        let mut crm_env = crm::CrmEnv::new(grasping_machine(), env, crm::RewardMode::Crm);
+        let (mut stage, _) = crm_env.reset(0).expect("reset");
+        let mut oracle = Oracle::with_shift(shift);
+        loop {
+            let name = crm_env.machine().stage_name(stage).to_string();
+            let action = oracle.act(crm_env.env(), &name);
+            if name == "grasp" && action[3..].iter().any(|&a| a > 0.0) {
+                return crm_env.env().observation_parts().relative;
+            }
+            let step = crm_env.step(&action).expect("step");
+            assert!(!step.done && !step.truncated, "{name}: the episode ended");
+            stage = step.stage;
+        }
+    };
+    let plain = relative_after_aligning([0.0; 3]);
+    let shifted = relative_after_aligning([0.012, 0.0, 0.0]);
+    // `relative` is the grasp location minus the palm: 1.2 cm further along +x, within the
+    // oracle's 3 mm tolerance.
+    assert!(plain.iter().all(|r| r.abs() < 0.004), "{plain:?}");
+    assert!((shifted[0] + 0.012).abs() < 0.004, "{shifted:?}");
+    assert!(
+        shifted[1].abs() < 0.004 && shifted[2].abs() < 0.004,
+        "{shifted:?}"
+    );
 }

@@ -98,7 +98,7 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
             }
             check_task(&spec.task, &spec.tasks, &spec.topology)?;
             check_record(&spec.record)?;
-            check_imitation(&spec)?;
+            check_imitation(catalog, &spec)?;
             crm_api::jobs::check_hold_s(spec.hold_s)
                 .map_err(|message| ApiError::invalid("hold_s", message))?;
             spec.config
@@ -215,7 +215,7 @@ pub(super) fn eval_spec(catalog: &crm_api::Catalog, fields: Value) -> Result<Eva
     Ok(spec)
 }
 
-fn check_imitation(spec: &TrainSpec) -> Result<(), ApiError> {
+fn check_imitation(catalog: &crm_api::Catalog, spec: &TrainSpec) -> Result<(), ApiError> {
     let Some(imitation) = &spec.imitation else {
         return Ok(());
     };
@@ -230,7 +230,24 @@ fn check_imitation(spec: &TrainSpec) -> Result<(), ApiError> {
     }
     imitation
         .validate()
-        .map_err(|e| ApiError::invalid(format!("imitation.{}", e.field), e.message))
+        .map_err(|e| ApiError::invalid(format!("imitation.{}", e.field), e.message))?;
+    let unknown = |field: String, id: &str| {
+        ApiError::invalid(
+            field,
+            format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
+        )
+    };
+    for (k, id) in imitation.tasks.iter().enumerate() {
+        if catalog.task(id).is_none() {
+            return Err(unknown(format!("imitation.tasks[{k}]"), id));
+        }
+    }
+    for id in imitation.shifts.keys() {
+        if catalog.task(id).is_none() {
+            return Err(unknown("imitation.shifts".to_string(), id));
+        }
+    }
+    Ok(())
 }
 
 fn check_record(record: &Option<crm_api::RecordSpec>) -> Result<(), ApiError> {

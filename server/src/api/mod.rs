@@ -134,8 +134,9 @@ pub fn document(worlds: &[crm_api::worlds::WorldEntry]) -> String {
     doc.to_string()
 }
 
-/// Sets every `world` property's enum to `names` and every task enum to `ids` (each keeping
-/// the `null` its enum allowed: absent and null mean the built-in world, or random tasks).
+/// Sets every `world` property's enum to `names` and every task enum (and the task-keyed
+/// `shifts`) to `ids` (each enum keeping the `null` it allowed: absent and null mean the
+/// built-in world, or random tasks).
 fn widen(value: &mut serde_json::Value, names: &[serde_json::Value], ids: &[String]) {
     use serde_json::Value;
     let keeping_null = |old: &Value, mut list: Vec<Value>| -> Value {
@@ -165,6 +166,15 @@ fn widen(value: &mut serde_json::Value, names: &[serde_json::Value], ids: &[Stri
                     && let Some(old) = items.get("enum").cloned()
                 {
                     items.insert("enum".into(), with_ids(&old));
+                }
+                // A map keyed by task id (the oracle's palm shifts): one property per id.
+                if let Some(keyed) = props
+                    .get_mut("shifts")
+                    .and_then(|t| t.get_mut("properties"))
+                    .and_then(Value::as_object_mut)
+                    && let Some(schema) = keyed.values().next().cloned()
+                {
+                    *keyed = ids.iter().map(|id| (id.clone(), schema.clone())).collect();
                 }
             }
             for child in map.values_mut() {

@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 
 use crm_api::jobs::failure_summary;
 use grasp_sim::benchmark::Objective;
-use grasp_sim::oracle::{Oracle, OracleEpisode, run_episode};
+use grasp_sim::oracle::{Oracle, OracleEpisode, run_shifted_episode};
 use grasp_sim::{GraspEnv, TaskChoice};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -32,6 +32,10 @@ pub struct OracleArgs {
     /// Print a per-step trace of the first episode of each task to stderr.
     #[arg(long)]
     pub trace: bool,
+    /// Move the palm by DX,DY,DZ (m, world frame) from TASK's grasp location before closing
+    /// (repeat the flag): a grasp that holds only off the arrival point (`palm-offset`).
+    #[arg(long = "shift", value_name = "TASK=DX,DY,DZ", value_parser = crm_api::parse_shift)]
+    pub shifts: Vec<(String, [f64; 3])>,
 }
 
 #[derive(Serialize)]
@@ -89,6 +93,9 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
             .map(|id| super::task_index(&benchmark, id))
             .collect::<anyhow::Result<_>>()?
     };
+    let shifts =
+        crate::jobs::demos::shifts_by_task(&benchmark, &args.shifts.iter().cloned().collect())
+            .map_err(|e| anyhow::anyhow!("--shift: {e:#}"))?;
     if args.trace {
         for &task in &selected {
             trace(
@@ -96,6 +103,7 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
                 machine.clone(),
                 task,
                 args.seed,
+                shifts[task],
             )?;
         }
     }
@@ -107,7 +115,8 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
         .par_iter()
         .map(|&(task, seed)| {
             let env = GraspEnv::new(benchmark.clone(), config.clone());
-            run_episode(env, machine.clone(), task, seed).map(|(episode, _)| episode)
+            run_shifted_episode(env, machine.clone(), task, seed, shifts[task])
+                .map(|(episode, _)| episode)
         })
         .collect::<Result<Vec<_>, _>>()?;
 
@@ -185,12 +194,18 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
 }
 
 /// A per-step trace of one episode, for tuning tasks.
-fn trace(env: GraspEnv, machine: crm::Machine, task: usize, seed: u64) -> anyhow::Result<()> {
+fn trace(
+    env: GraspEnv,
+    machine: crm::Machine,
+    task: usize,
+    seed: u64,
+    shift: [f32; 3],
+) -> anyhow::Result<()> {
     let mut env = env;
     env.set_task_choice(TaskChoice::Fixed(task))?;
     let mut crm_env = crm::CrmEnv::new(machine, env, crm::RewardMode::Crm);
     let (mut stage, _) = crm_env.reset(seed)?;
-    let mut oracle = Oracle::new();
+    let mut oracle = Oracle::with_shift(shift);
     eprintln!("# task {}", crm_env.env().task().id);
     loop {
         let name = crm_env.machine().stage_name(stage).to_string();

@@ -65,6 +65,20 @@ pub struct TrainArgs {
     /// Learning rate of behaviour cloning.
     #[arg(long, default_value_t = 1e-3)]
     pub bc_learning_rate: f64,
+    /// Only these tasks are demonstrated (ids; repeat the flag); none: the training tasks.
+    #[arg(long = "bc-task", value_name = "TASK")]
+    pub bc_tasks: Vec<String>,
+    /// The oracle moves the palm by DX,DY,DZ (m, world frame) from TASK's grasp location
+    /// before it closes, as `crm oracle --shift` does (repeat the flag).
+    #[arg(long = "bc-shift", value_name = "TASK=DX,DY,DZ", value_parser = crm_api::parse_shift)]
+    pub bc_shifts: Vec<(String, [f64; 3])>,
+    /// Only these stages' steps are cloned (names, e.g. `grasp`; repeat the flag); none: all.
+    #[arg(long = "bc-stage", value_name = "STAGE")]
+    pub bc_stages: Vec<String>,
+    /// Episodes of the starting policy on the training tasks not in --bc-task (all of them
+    /// without it) whose states keep its own actions in behaviour cloning (0: none).
+    #[arg(long, default_value_t = 0)]
+    pub bc_anchor_episodes: u64,
     /// Draw tasks more often where the policy fails (a job's `curriculum`); off: uniform, as
     /// in the paper.
     #[arg(long)]
@@ -80,11 +94,31 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         epochs: args.bc_epochs,
         learning_rate: args.bc_learning_rate,
         noise: args.bc_noise,
+        tasks: args.bc_tasks.clone(),
+        shifts: args.bc_shifts.iter().cloned().collect(),
+        stages: args.bc_stages.clone(),
+        anchor_episodes: args.bc_anchor_episodes,
     });
+    if imitation.is_none()
+        && !(args.bc_tasks.is_empty()
+            && args.bc_shifts.is_empty()
+            && args.bc_stages.is_empty()
+            && args.bc_anchor_episodes == 0)
+    {
+        bail!(
+            "--bc-task, --bc-shift, --bc-stage and --bc-anchor-episodes shape behaviour cloning: give --bc-episodes too"
+        );
+    }
     if let Some(imitation) = &imitation {
-        imitation
-            .validate()
-            .map_err(|e| anyhow::anyhow!("--bc-{}: {}", e.field.replace('_', "-"), e.message))?;
+        imitation.validate().map_err(|e| {
+            let flag = match e.field {
+                "tasks" => "task".to_string(),
+                "shifts" => "shift".to_string(),
+                "stages" => "stage".to_string(),
+                field => field.replace('_', "-"),
+            };
+            anyhow::anyhow!("--bc-{flag}: {}", e.message)
+        })?;
         if !ImitationSpec::supports(args.algo) {
             bail!(
                 "--bc-episodes: behaviour cloning is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo)"

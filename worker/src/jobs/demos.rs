@@ -30,6 +30,13 @@ pub struct DemoSource<'a> {
     /// live dimension (DART, Laskey et al., 2017): the rows keep the clean label, so the
     /// clone also sees how the oracle recovers from small mistakes. 0: none.
     pub noise: f32,
+    /// Per task index, the palm shift of the oracle ([`Oracle::with_shift`]); empty: none.
+    pub shifts: &'a [[f32; 3]],
+    /// The stages (indices) whose rows are kept; empty: every stage.
+    pub stages: &'a [usize],
+    /// Task indices whose episodes give no anchor rows (the demonstrated tasks; see
+    /// [`super::anchors::policy_anchors`]).
+    pub skip: &'a [usize],
 }
 
 /// What a collection of demonstrations gave.
@@ -39,6 +46,8 @@ pub struct Collected {
     pub episodes: u64,
     /// Episodes that ended in the `success` stage (their rows are the demonstrations).
     pub successes: u64,
+    /// Rows of anchor states among `demos`.
+    pub anchors: usize,
 }
 
 /// Runs `episodes` oracle episodes; keeps the rows of the successful ones (the tests' form of
@@ -49,7 +58,7 @@ pub fn oracle_demos(source: &DemoSource, episodes: u64) -> anyhow::Result<Collec
 }
 
 /// Episodes run in parallel per block of this many; progress is told between blocks.
-const BLOCK: u64 = 64;
+pub(super) const BLOCK: u64 = 64;
 
 /// [`oracle_demos`], calling `progress(episodes done)` after each block of episodes; `None`
 /// when `progress` answers `false` (the job was cancelled). The same demonstrations whatever
@@ -92,7 +101,8 @@ fn episode(source: &DemoSource, seed: u64) -> anyhow::Result<(bool, Demos)> {
     source.choice.apply(&mut grasp)?;
     let mut env = crm::CrmEnv::new(source.machine.clone(), grasp, crm::RewardMode::Crm);
     let (mut stage, mut state) = env.reset(seed)?;
-    let mut oracle = Oracle::new();
+    let shift = source.shifts.get(env.env().task_index()).copied();
+    let mut oracle = Oracle::with_shift(shift.unwrap_or_default());
     let mut noise = crm_learn::Noise::new(seed ^ 0x5EED_DA27);
     let mut demos = Demos::default();
     loop {
@@ -112,10 +122,12 @@ fn episode(source: &DemoSource, seed: u64) -> anyhow::Result<(bool, Demos)> {
         } else {
             label.clone()
         };
-        demos.states.push(state.clone());
-        demos.stages.push(stage);
-        demos.masks.push(mask);
-        demos.actions.push(label);
+        if keeps(source.stages, stage) {
+            demos.states.push(state.clone());
+            demos.stages.push(stage);
+            demos.masks.push(mask);
+            demos.actions.push(label);
+        }
         let step = env.step(&action)?;
         if step.done || step.truncated {
             let success = step.done && env.machine().stage_name(step.stage) == "success";
@@ -125,8 +137,30 @@ fn episode(source: &DemoSource, seed: u64) -> anyhow::Result<(bool, Demos)> {
     }
 }
 
+/// Whether a row of `stage` is kept under a stage filter (empty: every stage).
+pub(super) fn keeps(stages: &[usize], stage: usize) -> bool {
+    stages.is_empty() || stages.contains(&stage)
+}
+
+/// The oracle's palm shift per task index (zero where none is given); an unknown task id is
+/// an error.
+pub fn shifts_by_task(
+    benchmark: &Benchmark,
+    shifts: &std::collections::BTreeMap<String, [f64; 3]>,
+) -> anyhow::Result<Vec<[f32; 3]>> {
+    let mut by_task = vec![[0.0; 3]; benchmark.tasks.len()];
+    for (id, shift) in shifts {
+        let Some(task) = benchmark.task_index(id) else {
+            bail!("unknown task {id:?} (see `crm tasks`)");
+        };
+        by_task[task] = shift.map(|v| v as f32);
+    }
+    Ok(by_task)
+}
+
 /// The phases of a job's imitation stage, as the coordinator shows them.
 pub const PHASE_DEMOS: &str = "demonstrations";
+pub const PHASE_ANCHORS: &str = "anchor states";
 pub const PHASE_CLONING: &str = "behaviour cloning";
 
 /// Runs a training job's imitation (`spec.imitation`; none: nothing to do) on `trainer`'s
@@ -152,7 +186,38 @@ pub fn imitate(
     let started = std::time::Instant::now();
     let benchmark = env.benchmark()?;
     let machine = env.machine()?;
-    let choice = EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
+    // The tasks demonstrated: the imitation's own list, else the job's.
+    if let Some(id) = imitation
+        .tasks
+        .iter()
+        .find(|id| benchmark.task_index(id).is_none())
+    {
+        bail!("imitation.tasks: unknown task {id:?} (see `crm tasks`)");
+    }
+    let choice = if imitation.tasks.is_empty() {
+        EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?
+    } else {
+        EnvChoice::of(&benchmark, &None, &imitation.tasks, &spec.topology)?
+    };
+    let shifts = shifts_by_task(&benchmark, &imitation.shifts)
+        .map_err(|e| anyhow::anyhow!("imitation.shifts: {e}"))?;
+    let stages = imitation
+        .stages
+        .iter()
+        .map(|name| {
+            (0..machine.stage_count())
+                .find(|&s| machine.stage_name(s) == name)
+                .ok_or_else(|| {
+                    let names: Vec<&str> = (0..machine.stage_count())
+                        .map(|s| machine.stage_name(s))
+                        .collect();
+                    anyhow::anyhow!(
+                        "imitation.stages: unknown stage {name:?} (this world's machine has {})",
+                        names.join(", ")
+                    )
+                })
+        })
+        .collect::<anyhow::Result<Vec<usize>>>()?;
     let config = env.config_for(spec.objective, spec.hold_s);
     let source = DemoSource {
         benchmark: &benchmark,
@@ -161,12 +226,43 @@ pub fn imitate(
         choice: &choice,
         seed: spec.seed.wrapping_mul(7_919).wrapping_add(1 << 32),
         noise: imitation.noise as f32,
+        shifts: &shifts,
+        stages: &stages,
+        skip: &[],
     };
     let total = imitation.episodes;
     let collected = oracle_demos_with(&source, total, |done| phase(PHASE_DEMOS, done, total))?;
-    let Some(all) = collected else {
+    let Some(mut all) = collected else {
         return Ok(false);
     };
+    let anchors = imitation.anchor_episodes;
+    if anchors > 0 {
+        // The starting policy's own episodes on the job's other tasks, labelled with its
+        // means: the regression holds it to them while it learns the demonstrated tasks.
+        let job_tasks = EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
+        let demonstrated: Vec<usize> = imitation
+            .tasks
+            .iter()
+            .filter_map(|id| benchmark.task_index(id))
+            .collect();
+        let anchor_source = DemoSource {
+            choice: &job_tasks,
+            seed: source.seed.wrapping_add(1 << 40),
+            skip: &demonstrated,
+            ..source
+        };
+        let rows = super::anchors::policy_anchors(
+            &anchor_source,
+            anchors,
+            |states, stages| trainer.policy_actions(states, stages),
+            |done| phase(PHASE_ANCHORS, done, anchors),
+        )?;
+        let Some(rows) = rows else {
+            return Ok(false);
+        };
+        all.anchors = rows.len();
+        all.demos.extend(rows);
+    }
     let epochs = imitation.epochs as u64;
     let mut going = phase(PHASE_CLONING, 0, epochs);
     if !going {
@@ -185,10 +281,11 @@ pub fn imitate(
         return Ok(false);
     }
     let line = format!(
-        "behaviour cloning: {} of {} oracle episodes succeeded, {} steps, {} epochs, loss {loss:.4}, {:.0} s",
+        "behaviour cloning: {} of {} oracle episodes succeeded, {} steps ({} of them anchor states), {} epochs, loss {loss:.4}, {:.0} s",
         all.successes,
         all.episodes,
         all.demos.len(),
+        all.anchors,
         imitation.epochs,
         started.elapsed().as_secs_f64()
     );
@@ -201,7 +298,7 @@ mod tests {
     use grasp_sim::TaskChoice;
 
     #[test]
-    fn the_oracles_successful_episodes_are_the_demonstrations_and_noise_moves_the_states() {
+    fn the_oracles_successes_are_the_demonstrations_noise_moves_them_and_stages_filter_them() {
         let benchmark = Arc::new(Benchmark::builtin());
         let machine = crm::Machine::from_spec(grasp_sim::spec::grasping_spec()).expect("machine");
         let task = benchmark.task_index("mouse-press").expect("task");
@@ -217,6 +314,9 @@ mod tests {
             choice: &choice,
             seed: 3,
             noise,
+            shifts: &[],
+            stages: &[],
+            skip: &[],
         };
         // The oracle presses every time: all its rows are demonstrations.
         let clean = oracle_demos(&source(0.0), 2).expect("oracle");
@@ -246,5 +346,21 @@ mod tests {
         // The labels stay the oracle's clean actions: in approach it heads for the grasp
         // location at full speed on some axis.
         assert!(noisy.demos.actions[0].iter().any(|a| a.abs() == 1.0));
+        // A stage filter keeps only those stages' rows.
+        let grasp = (0..machine.stage_count())
+            .find(|&s| machine.stage_name(s) == "grasp")
+            .expect("grasp stage");
+        let only_grasp = [grasp];
+        let graspy = oracle_demos(
+            &DemoSource {
+                stages: &only_grasp,
+                ..source(0.0)
+            },
+            2,
+        )
+        .expect("grasp rows");
+        assert_eq!(graspy.successes, 2);
+        assert!(!graspy.demos.is_empty() && graspy.demos.len() < d.len());
+        assert!(graspy.demos.stages.iter().all(|&s| s == grasp));
     }
 }

@@ -2,6 +2,7 @@
 //! worker (`crm worker`): a training run that advances one PPO iteration at a time and can
 //! resume from a checkpoint, and a checkpoint evaluation over random tasks (Table I).
 
+pub mod anchors;
 pub mod demos;
 pub mod eval;
 pub mod train;

@@ -219,6 +219,23 @@ impl Trainer {
         }
     }
 
+    /// The policy's actions at `states` in `stages` (union space): sampled, as it acts in
+    /// training, and its means, unclamped (behaviour cloning's anchor states and labels).
+    pub fn policy_actions(
+        &mut self,
+        states: &[Vec<f32>],
+        stages: &[usize],
+    ) -> anyhow::Result<crate::jobs::anchors::PolicyActions> {
+        let Learner::Ppo(ppo) = &mut self.learner else {
+            bail!("behaviour cloning is for the PPO learners");
+        };
+        // The masks weigh only the log-probabilities, which are not wanted here.
+        let masks = vec![vec![1.0; ppo.net.layout().actions]; states.len()];
+        let sampled = ppo.act_batch(states, stages, &masks, false)?.0;
+        let means = ppo.act_batch(states, stages, &masks, true)?.0;
+        Ok((sampled, means))
+    }
+
     /// Environment steps trained so far (a resumed run starts at the checkpoint's).
     pub fn steps(&self) -> u64 {
         self.done
