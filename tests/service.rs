@@ -133,6 +133,38 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
         "the clone presses: {}",
         evaluated["result"]
     );
+    // A job may start from a stored checkpoint (`fine_tune`) and teach it one task, the
+    // other tasks anchored by the starting policy's own episodes.
+    let tuned = submit(
+        &addr,
+        &format!(
+            r#"{{"kind": "train", "algorithm": "crm-ppo", "tasks": ["mouse-press", "stapler-press"], "steps": 64, "seed": 3, "envs": 1, "config": {{"rollout_steps": 64}}, "fine_tune": {checkpoint_id}, "imitation": {{"episodes": 2, "epochs": 2, "tasks": ["stapler-press"], "shifts": {{"stapler-press": [0, 0, 0.002]}}, "stages": ["grasp"], "anchor_episodes": 2}}}}"#
+        ),
+    );
+    let tuned = wait_state(&addr, tuned["id"].as_i64().expect("id"), "succeeded", 240);
+    assert_eq!(tuned["result"]["fine_tuned_from"], checkpoint_id, "{tuned}");
+    assert_eq!(tuned["spec"]["imitation"]["anchor_episodes"], 2, "{tuned}");
+    for (body, status) in [
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "fine_tune": 0}"#.to_string(),
+            400,
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "fine_tune": 99999}"#
+                .to_string(),
+            404,
+        ),
+        (
+            format!(
+                r#"{{"kind": "train", "algorithm": "lppo", "steps": 10, "fine_tune": {checkpoint_id}}}"#
+            ),
+            400,
+        ),
+    ] {
+        let reply = http(&addr, "POST", "/api/v1/jobs", Some(&body), None);
+        assert_eq!(reply.status, status, "{body}: {}", reply.json());
+        assert_eq!(error_field(&reply), "fine_tune", "{body}");
+    }
 
     // Refused requests change nothing.
     let before = get(&addr, "/api/v1/jobs");

@@ -119,6 +119,11 @@ pub struct TrainSpec {
     /// PPO learners of the grasping machine only (crm-ppo, ippo, lppo).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub imitation: Option<ImitationSpec>,
+    /// Start from this stored checkpoint's weights and observation statistics (its id, of
+    /// the same algorithm, from this world or another with the same machine and observation
+    /// layout), counting steps from 0, as `crm train --fine-tune` does; absent: fresh weights.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fine_tune: Option<i64>,
     /// `scripted` (default, the paper's protocol) or `learned`.
     #[serde(default)]
     pub objective: ObjectiveMode,

@@ -104,6 +104,7 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
             spec.config
                 .validate()
                 .map_err(|e| ApiError::invalid(format!("config.{}", e.field), e.message))?;
+            check_fine_tune(state, &spec).await?;
             Ok(Submission {
                 kind: "train",
                 algorithm: spec.algorithm.name().to_string(),
@@ -246,6 +247,37 @@ fn check_imitation(catalog: &crm_api::Catalog, spec: &TrainSpec) -> Result<(), A
         if catalog.task(id).is_none() {
             return Err(unknown("imitation.shifts".to_string(), id));
         }
+    }
+    Ok(())
+}
+
+/// A fine-tune names a stored checkpoint of the job's algorithm (404 when there is none).
+/// Whether its machine and observation layout fit the job's world is the worker's check,
+/// which reads the file.
+async fn check_fine_tune(state: &AppState, spec: &TrainSpec) -> Result<(), ApiError> {
+    let Some(id) = spec.fine_tune else {
+        return Ok(());
+    };
+    if id <= 0 {
+        return Err(ApiError::invalid(
+            "fine_tune",
+            "must be a checkpoint's id (a positive integer)",
+        ));
+    }
+    let checkpoint = state
+        .store
+        .checkpoint(id)
+        .await
+        .map_err(|_| ApiError::not_found("fine_tune", format!("no checkpoint {id}")))?;
+    if checkpoint.algorithm != spec.algorithm.name() {
+        return Err(ApiError::invalid(
+            "fine_tune",
+            format!(
+                "checkpoint {id} is a {} policy, not {}",
+                checkpoint.algorithm,
+                spec.algorithm.name()
+            ),
+        ));
     }
     Ok(())
 }

@@ -119,7 +119,8 @@ impl Store {
     }
 
     /// Retention: removes the checkpoints of `job` older than its newest `keep`, except one
-    /// that is the job's final checkpoint or that an evaluation job names. Rows go first, in
+    /// that is the job's final checkpoint, that an evaluation job names or that a training
+    /// job starts from (`fine_tune`). Rows go first, in
     /// one transaction, then their files; returns how many were removed.
     pub async fn prune_checkpoints(&self, job: i64, keep: u32) -> Result<usize> {
         let mut tx = self.write_tx().await?;
@@ -127,6 +128,8 @@ impl Store {
             "SELECT id, file FROM checkpoints WHERE job_id = ?1 \
              AND id NOT IN (SELECT id FROM checkpoints WHERE job_id = ?1 ORDER BY id DESC LIMIT ?2) \
              AND id NOT IN (SELECT checkpoint_id FROM jobs WHERE checkpoint_id IS NOT NULL) \
+             AND id NOT IN (SELECT json_extract(spec, '$.fine_tune') FROM jobs \
+                            WHERE json_extract(spec, '$.fine_tune') IS NOT NULL) \
              AND id IS NOT (SELECT json_extract(result, '$.checkpoint_id') FROM jobs WHERE id = ?1)",
         )
         .bind(job)

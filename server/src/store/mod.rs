@@ -512,6 +512,18 @@ impl Store {
                 "in use: evaluation job {eval} is {state}"
             )));
         }
+        let fine_tuning: Option<(i64, String)> = sqlx::query_as(
+            "SELECT id, state FROM jobs WHERE state IN ('queued', 'running') \
+             AND json_extract(spec, '$.fine_tune') IN (SELECT id FROM checkpoints WHERE job_id = ?)",
+        )
+        .bind(id)
+        .fetch_optional(&mut *tx)
+        .await?;
+        if let Some((job, state)) = fine_tuning {
+            return Err(StoreError::Conflict(format!(
+                "in use: training job {job}, which starts from its checkpoint, is {state}"
+            )));
+        }
         let mut files: Vec<(PathBuf, i64)> = sqlx::query_as::<_, (String, i64)>(
             "SELECT file, size FROM checkpoints WHERE job_id = ?",
         )

@@ -56,3 +56,53 @@ async fn deleting_runs_while_another_job_reports_never_fails() {
     store.close().await;
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A training job that starts from a checkpoint (`fine_tune` in its spec) keeps that
+/// checkpoint from retention, and the run that made it cannot be deleted while the job waits.
+#[tokio::test]
+async fn a_checkpoint_a_queued_job_fine_tunes_from_is_kept_and_its_run_stays() {
+    let dir = temp_dir("fine-tune");
+    let store = Store::open(&dir).await.expect("open");
+    let run = store.create_job(new_job("{}")).await.expect("run").id;
+    let mut ids = Vec::new();
+    for k in 0..3 {
+        let file = format!("job{run}-{k}.safetensors");
+        let checkpoint = NewCheckpoint {
+            job: Some(run),
+            algorithm: "ppo",
+            steps: k,
+            size: 1,
+            file: &file,
+            sha256: "",
+            name: None,
+        };
+        ids.push(
+            store
+                .add_checkpoint(&checkpoint)
+                .await
+                .expect("checkpoint")
+                .id,
+        );
+    }
+    store.cancel_job(run).await.expect("cancel");
+    let spec = format!(
+        r#"{{"algorithm": "ppo", "steps": 10, "fine_tune": {}}}"#,
+        ids[0]
+    );
+    let waiting = store.create_job(new_job(&spec)).await.expect("job").id;
+    // Keeping the newest one, the oldest stays: the queued job starts from it.
+    assert_eq!(store.prune_checkpoints(run, 1).await.expect("prune"), 1);
+    assert!(store.checkpoint(ids[0]).await.is_ok());
+    assert!(store.checkpoint(ids[1]).await.is_err());
+    match store.delete_run(run).await {
+        Err(StoreError::Conflict(why)) => assert!(why.contains(&waiting.to_string()), "{why}"),
+        other => panic!("deleted a run a queued job starts from: {other:?}"),
+    }
+    store.cancel_job(waiting).await.expect("cancel");
+    store
+        .delete_run(run)
+        .await
+        .expect("deleted once nothing waits on it");
+    store.close().await;
+    std::fs::remove_dir_all(&dir).ok();
+}

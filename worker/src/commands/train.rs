@@ -143,6 +143,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         sac,
         record: None,
         imitation,
+        // The command line names a file (`--fine-tune`), not a stored checkpoint.
+        fine_tune: None,
         objective: args.env.protocol,
         curriculum: args.curriculum,
         hold_s: args.env.hold_s,

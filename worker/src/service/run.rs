@@ -148,12 +148,20 @@ fn train(
     if spec.envs.is_none() {
         spec.envs = options.envs;
     }
+    // A job resumes from its own last checkpoint (the lease names it); a fresh one may start
+    // from a stored checkpoint's weights (`fine_tune`).
     let init = if job.checkpoint_id != 0 {
         let path = dir.join("resume.safetensors");
         link.handle
             .block_on(link.client.download(job.checkpoint_id, &path))
             .context("downloading the checkpoint to resume from")?;
-        Some(path)
+        Some((path, true))
+    } else if let Some(id) = spec.fine_tune {
+        let path = dir.join("fine-tune.safetensors");
+        link.handle
+            .block_on(link.client.download(id, &path))
+            .with_context(|| format!("fine_tune: downloading checkpoint {id}"))?;
+        Some((path, false))
     } else {
         None
     };
@@ -165,7 +173,13 @@ fn train(
     let mut trainer = Trainer::new(
         spec.clone(),
         &env,
-        init.as_deref().map(crate::jobs::Init::Resume),
+        init.as_ref().map(|(path, resume)| {
+            if *resume {
+                crate::jobs::Init::Resume(path)
+            } else {
+                crate::jobs::Init::FineTune(path)
+            }
+        }),
         recorder.clone(),
     )?;
     let resumed_from = trainer.steps();
@@ -253,6 +267,7 @@ fn train(
         "steps": trainer.steps(),
         "stopped_early": trainer.stopped_early(),
         "resumed_from_steps": resumed_from,
+        "fine_tuned_from": spec.fine_tune,
         "checkpoint_id": checkpoint_id,
     })))
 }
