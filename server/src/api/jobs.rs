@@ -121,9 +121,7 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
             }
             .ok_or_else(|| ApiError::invalid("checkpoint_id", "must be a positive integer"))?;
             let spec = eval_spec(catalog, Value::Object(fields))?;
-            let checkpoint = state.store.checkpoint(checkpoint_id).await.map_err(|_| {
-                ApiError::not_found("checkpoint_id", format!("no checkpoint {checkpoint_id}"))
-            })?;
+            let checkpoint = stored_checkpoint(state, "checkpoint_id", checkpoint_id).await?;
             Ok(Submission {
                 kind: "eval",
                 algorithm: checkpoint.algorithm,
@@ -166,6 +164,17 @@ pub(super) fn world_of<'a>(
     })
 }
 
+/// A task id of the catalog, or a 400 naming `field`.
+fn known_task(catalog: &crm_api::Catalog, field: String, id: &str) -> Result<(), ApiError> {
+    match catalog.task(id) {
+        Some(_) => Ok(()),
+        None => Err(ApiError::invalid(
+            field,
+            format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
+        )),
+    }
+}
+
 /// Checks task ids and a topology name against the catalog, naming the field.
 pub(super) fn check_task(
     catalog: &crm_api::Catalog,
@@ -179,12 +188,7 @@ pub(super) fn check_task(
         .enumerate()
         .map(|(k, t)| (format!("tasks[{k}]"), t));
     for (field, id) in named.chain(listed) {
-        if catalog.task(id).is_none() {
-            return Err(ApiError::invalid(
-                field,
-                format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
-            ));
-        }
+        known_task(catalog, field, id)?;
     }
     match topology.as_deref() {
         None | Some("task") | Some("auto") => Ok(()),
@@ -232,23 +236,26 @@ fn check_imitation(catalog: &crm_api::Catalog, spec: &TrainSpec) -> Result<(), A
     imitation
         .validate()
         .map_err(|e| ApiError::invalid(format!("imitation.{}", e.field), e.message))?;
-    let unknown = |field: String, id: &str| {
-        ApiError::invalid(
-            field,
-            format!("unknown task {id:?} (GET /api/v1/tasks lists them)"),
-        )
-    };
     for (k, id) in imitation.tasks.iter().enumerate() {
-        if catalog.task(id).is_none() {
-            return Err(unknown(format!("imitation.tasks[{k}]"), id));
-        }
+        known_task(catalog, format!("imitation.tasks[{k}]"), id)?;
     }
     for id in imitation.shifts.keys() {
-        if catalog.task(id).is_none() {
-            return Err(unknown("imitation.shifts".to_string(), id));
-        }
+        known_task(catalog, "imitation.shifts".to_string(), id)?;
     }
     Ok(())
+}
+
+/// The stored checkpoint `id` that `field` names, or a 404 naming `field`.
+async fn stored_checkpoint(
+    state: &AppState,
+    field: &str,
+    id: i64,
+) -> Result<crate::store::CheckpointRow, ApiError> {
+    state
+        .store
+        .checkpoint(id)
+        .await
+        .map_err(|_| ApiError::not_found(field, format!("no checkpoint {id}")))
 }
 
 /// A fine-tune names a stored checkpoint of the job's algorithm (404 when there is none).
@@ -264,11 +271,7 @@ async fn check_fine_tune(state: &AppState, spec: &TrainSpec) -> Result<(), ApiEr
             "must be a checkpoint's id (a positive integer)",
         ));
     }
-    let checkpoint = state
-        .store
-        .checkpoint(id)
-        .await
-        .map_err(|_| ApiError::not_found("fine_tune", format!("no checkpoint {id}")))?;
+    let checkpoint = stored_checkpoint(state, "fine_tune", id).await?;
     if checkpoint.algorithm != spec.algorithm.name() {
         return Err(ApiError::invalid(
             "fine_tune",

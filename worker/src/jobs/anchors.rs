@@ -117,9 +117,7 @@ mod tests {
             max_episode_steps: 12,
             ..SimConfig::default()
         };
-        let grasp = (0..machine.stage_count())
-            .find(|&s| machine.stage_name(s) == "grasp")
-            .expect("grasp stage");
+        let grasp = machine.stage_id("grasp").expect("grasp stage");
         let skip = [stapler];
         let source = DemoSource {
             benchmark: &benchmark,

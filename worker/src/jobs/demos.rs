@@ -187,13 +187,15 @@ pub fn imitate(
     let benchmark = env.benchmark()?;
     let machine = env.machine()?;
     // The tasks demonstrated: the imitation's own list, else the job's.
-    if let Some(id) = imitation
+    let demonstrated = imitation
         .tasks
         .iter()
-        .find(|id| benchmark.task_index(id).is_none())
-    {
-        bail!("imitation.tasks: unknown task {id:?} (see `crm tasks`)");
-    }
+        .map(|id| {
+            benchmark.task_index(id).ok_or_else(|| {
+                anyhow::anyhow!("imitation.tasks: unknown task {id:?} (see `crm tasks`)")
+            })
+        })
+        .collect::<anyhow::Result<Vec<usize>>>()?;
     let choice = if imitation.tasks.is_empty() {
         EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?
     } else {
@@ -205,17 +207,15 @@ pub fn imitate(
         .stages
         .iter()
         .map(|name| {
-            (0..machine.stage_count())
-                .find(|&s| machine.stage_name(s) == name)
-                .ok_or_else(|| {
-                    let names: Vec<&str> = (0..machine.stage_count())
-                        .map(|s| machine.stage_name(s))
-                        .collect();
-                    anyhow::anyhow!(
-                        "imitation.stages: unknown stage {name:?} (this world's machine has {})",
-                        names.join(", ")
-                    )
-                })
+            machine.stage_id(name).ok_or_else(|| {
+                let names: Vec<&str> = (0..machine.stage_count())
+                    .map(|s| machine.stage_name(s))
+                    .collect();
+                anyhow::anyhow!(
+                    "imitation.stages: unknown stage {name:?} (this world's machine has {})",
+                    names.join(", ")
+                )
+            })
         })
         .collect::<anyhow::Result<Vec<usize>>>()?;
     let config = env.config_for(spec.objective, spec.hold_s);
@@ -240,11 +240,6 @@ pub fn imitate(
         // The starting policy's own episodes on the job's other tasks, labelled with its
         // means: the regression holds it to them while it learns the demonstrated tasks.
         let job_tasks = EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
-        let demonstrated: Vec<usize> = imitation
-            .tasks
-            .iter()
-            .filter_map(|id| benchmark.task_index(id))
-            .collect();
         let anchor_source = DemoSource {
             choice: &job_tasks,
             seed: source.seed.wrapping_add(1 << 40),
@@ -347,9 +342,7 @@ mod tests {
         // location at full speed on some axis.
         assert!(noisy.demos.actions[0].iter().any(|a| a.abs() == 1.0));
         // A stage filter keeps only those stages' rows.
-        let grasp = (0..machine.stage_count())
-            .find(|&s| machine.stage_name(s) == "grasp")
-            .expect("grasp stage");
+        let grasp = machine.stage_id("grasp").expect("grasp stage");
         let only_grasp = [grasp];
         let graspy = oracle_demos(
             &DemoSource {
