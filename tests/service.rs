@@ -158,7 +158,7 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
             format!(
                 r#"{{"kind": "train", "algorithm": "lppo", "steps": 10, "fine_tune": {checkpoint_id}}}"#
             ),
-            400,
+            409,
         ),
     ] {
         let reply = http(&addr, "POST", "/api/v1/jobs", Some(&body), None);

@@ -127,3 +127,30 @@ fn the_documents_learner_settings_are_the_configs_fields() {
         serde_json::from_value::<crm_api::PpoConfig>(config).expect("a documented schedule");
     }
 }
+
+/// A train request's property is `nullable` in the document exactly when the server reads
+/// `null` there as absent: schemathesis sends `null` wherever the document allows it and
+/// expects a refusal wherever it does not.
+#[test]
+fn the_documents_nullable_train_fields_are_the_ones_the_server_accepts_as_null() {
+    let doc: serde_json::Value =
+        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
+    let schemas = &doc["components"]["schemas"];
+    for name in ["TrainPpoRequest", "TrainOtherRequest", "SweepBase"] {
+        let properties = schemas[name]["properties"].as_object().expect("properties");
+        assert!(properties.contains_key("fine_tune"), "{name}");
+        for (field, property) in properties {
+            if field == "kind" {
+                continue;
+            }
+            let mut body = serde_json::json!({"algorithm": "crm-ppo", "steps": 10});
+            body[field] = serde_json::Value::Null;
+            let accepted = serde_json::from_value::<crm_api::TrainSpec>(body).is_ok();
+            let nullable = property["nullable"] == serde_json::Value::Bool(true);
+            assert_eq!(
+                accepted, nullable,
+                "{name}.{field}: null accepted {accepted}"
+            );
+        }
+    }
+}

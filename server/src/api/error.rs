@@ -43,6 +43,15 @@ impl ApiError {
         }
     }
 
+    /// A well-formed value that does not fit what is stored (a fine-tune from another
+    /// algorithm's checkpoint); names the field.
+    pub fn conflict_with(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self {
+            field: Some(field.into()),
+            ..Self::conflict(message)
+        }
+    }
+
     pub fn unauthorized() -> Self {
         Self {
             status: StatusCode::UNAUTHORIZED,

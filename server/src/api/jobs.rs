@@ -258,8 +258,9 @@ async fn stored_checkpoint(
         .map_err(|_| ApiError::not_found(field, format!("no checkpoint {id}")))
 }
 
-/// A fine-tune names a stored checkpoint of the job's algorithm (404 when there is none).
-/// Whether its machine and observation layout fit the job's world is the worker's check,
+/// A fine-tune names a stored checkpoint of the job's algorithm (404 when there is none,
+/// 409 when it holds another algorithm's policy: the request is well formed, the stored
+/// checkpoint does not fit it). Whether its machine and observation layout fit the job's world is the worker's check,
 /// which reads the file.
 async fn check_fine_tune(state: &AppState, spec: &TrainSpec) -> Result<(), ApiError> {
     let Some(id) = spec.fine_tune else {
@@ -273,7 +274,7 @@ async fn check_fine_tune(state: &AppState, spec: &TrainSpec) -> Result<(), ApiEr
     }
     let checkpoint = stored_checkpoint(state, "fine_tune", id).await?;
     if checkpoint.algorithm != spec.algorithm.name() {
-        return Err(ApiError::invalid(
+        return Err(ApiError::conflict_with(
             "fine_tune",
             format!(
                 "checkpoint {id} is a {} policy, not {}",
