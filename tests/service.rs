@@ -138,12 +138,13 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
     let tuned = submit(
         &addr,
         &format!(
-            r#"{{"kind": "train", "algorithm": "crm-ppo", "tasks": ["mouse-press", "stapler-press"], "steps": 64, "seed": 3, "envs": 1, "config": {{"rollout_steps": 64}}, "fine_tune": {checkpoint_id}, "imitation": {{"episodes": 2, "epochs": 2, "tasks": ["stapler-press"], "shifts": {{"stapler-press": [0, 0, 0.002]}}, "stages": ["grasp"], "anchor_episodes": 2}}}}"#
+            r#"{{"kind": "train", "algorithm": "crm-ppo", "tasks": ["mouse-press", "stapler-press"], "steps": 64, "seed": 3, "envs": 1, "config": {{"rollout_steps": 64}}, "fine_tune": {checkpoint_id}, "start_log_std": -2.3, "imitation": {{"episodes": 2, "epochs": 2, "tasks": ["stapler-press"], "shifts": {{"stapler-press": [0, 0, 0.002]}}, "stages": ["grasp"], "anchor_episodes": 2}}}}"#
         ),
     );
     let tuned = wait_state(&addr, tuned["id"].as_i64().expect("id"), "succeeded", 240);
     assert_eq!(tuned["result"]["fine_tuned_from"], checkpoint_id, "{tuned}");
     assert_eq!(tuned["spec"]["imitation"]["anchor_episodes"], 2, "{tuned}");
+    assert_eq!(tuned["spec"]["start_log_std"], -2.3, "{tuned}");
     for (body, status) in [
         (
             r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "fine_tune": 0}"#.to_string(),
@@ -233,6 +234,14 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
         (
             r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "anchor_episodes": 100001}}"#,
             "imitation.anchor_episodes",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "start_log_std": -5.5}"#,
+            "start_log_std",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-sac", "steps": 10, "start_log_std": -1}"#,
+            "start_log_std",
         ),
         (
             r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "objective": "telekinesis"}"#,

@@ -487,6 +487,8 @@ fn cloning_can_teach_one_task_with_a_palm_shift_while_anchor_states_keep_the_oth
         "grasp",
         "--bc-anchor-episodes",
         "2",
+        "--start-log-std",
+        "-2.3",
     ]);
     assert_eq!(code, 0, "{stderr}");
     // Three demonstrations of the mouse, and the stapler's states as anchors.
@@ -511,6 +513,7 @@ fn cloning_can_teach_one_task_with_a_palm_shift_while_anchor_states_keep_the_oth
         (&["--bc-shift", "mouse-press=0.5,0,0"][..], "--bc-shift"),
         (&["--bc-shift", "nope=0,0,0"][..], "imitation.shifts"),
         (&["--bc-task", "nope"][..], "imitation.tasks"),
+        (&["--start-log-std", "-6"][..], "--start-log-std"),
     ] {
         let (code, _, stderr) = train(extra);
         assert_eq!(code, 2, "{extra:?}: {stderr}");

@@ -124,6 +124,14 @@ pub struct TrainSpec {
     /// layout), counting steps from 0, as `crm train --fine-tune` does; absent: fresh weights.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fine_tune: Option<i64>,
+    /// Every log standard deviation of the policy at the run's start: it replaces
+    /// `config.init_log_std` on fresh weights and the checkpoint's own with `fine_tune`; a
+    /// resumed run keeps its own. Then PPO learns it on as always. PPO learners of the
+    /// grasping machine only (see [`check_start_log_std`]). A narrower noise set on a
+    /// fine-tune keeps sampled actions on grasps that the learned noise breaks
+    /// (docs/WORLDS.md, "Sampled actions").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_log_std: Option<f64>,
     /// `scripted` (default, the paper's protocol) or `learned`.
     #[serde(default)]
     pub objective: ObjectiveMode,
@@ -154,6 +162,34 @@ pub fn check_hold_s(hold_s: Option<f64>) -> Result<(), String> {
         )),
         _ => Ok(()),
     }
+}
+
+/// Lowest and highest `start_log_std`: `config.init_log_std`'s range.
+pub const START_LOG_STD_RANGE: (f64, f64) = (-5.0, 2.0);
+
+/// Checks a job's `start_log_std`: absent, or a value within [`START_LOG_STD_RANGE`] for a
+/// PPO learner of the grasping machine (crm-ppo, ippo, lppo), as `imitation` is: SAC's standard
+/// deviation is an output of its actor, and the flat ablation runs as the paper sets it.
+pub fn check_start_log_std(algorithm: Algorithm, value: Option<f64>) -> Result<(), String> {
+    let Some(value) = value else {
+        return Ok(());
+    };
+    if !matches!(
+        algorithm,
+        Algorithm::CrmPpo | Algorithm::Ippo | Algorithm::Lppo
+    ) {
+        return Err(format!(
+            "is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo), not {}",
+            algorithm.name()
+        ));
+    }
+    let (low, high) = START_LOG_STD_RANGE;
+    if !(value.is_finite() && (low..=high).contains(&value)) {
+        return Err(format!(
+            "must be in [{low}, {high}] (a log standard deviation)"
+        ));
+    }
+    Ok(())
 }
 
 fn is_default_sac(config: &SacConfig) -> bool {
@@ -477,6 +513,17 @@ mod tests {
             -1.0,
         ] {
             assert!(check_hold_s(Some(bad)).is_err(), "{bad}");
+        }
+        // The starting log standard deviation: PPO learners of the machine, within range.
+        assert!(check_start_log_std(Algorithm::CrmSac, None).is_ok());
+        for algorithm in [Algorithm::CrmPpo, Algorithm::Ippo, Algorithm::Lppo] {
+            assert!(check_start_log_std(algorithm, Some(-2.3)).is_ok());
+            for bad in [-5.01, 2.01, f64::NAN, f64::INFINITY] {
+                assert!(check_start_log_std(algorithm, Some(bad)).is_err(), "{bad}");
+            }
+        }
+        for algorithm in [Algorithm::CrmSac, Algorithm::Ppo] {
+            assert!(check_start_log_std(algorithm, Some(-2.3)).is_err());
         }
         // Curriculum: off unless asked, and not written out when off.
         let spec: TrainSpec =

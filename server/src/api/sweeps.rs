@@ -22,7 +22,7 @@ use crate::AppState;
 use crate::store::NewJob;
 
 /// Top-level fields of a training spec an axis may vary (besides `config.KEY`, `sac.KEY`).
-const AXES: [&str; 12] = [
+const AXES: [&str; 13] = [
     "algorithm",
     "seed",
     "steps",
@@ -35,6 +35,7 @@ const AXES: [&str; 12] = [
     "hold_s",
     "imitation",
     "record",
+    "start_log_std",
 ];
 
 /// The longest sweep name, in characters.

@@ -49,6 +49,11 @@ pub struct TrainArgs {
     /// and observation layout (the same hand with fewer sensors); steps count from 0.
     #[arg(long, value_name = "FILE", conflicts_with = "resume")]
     pub fine_tune: Option<PathBuf>,
+    /// Every log standard deviation of the policy at the start (a job's `start_log_std`):
+    /// instead of the config's `init_log_std`, or of the --fine-tune checkpoint's own; a
+    /// --resume keeps the checkpoint's.
+    #[arg(long, value_name = "LOG_STD", allow_negative_numbers = true)]
+    pub start_log_std: Option<f64>,
     /// Also write a checkpoint every this many iterations (0: only at the end).
     #[arg(long, default_value_t = 0)]
     pub checkpoint_every: u64,
@@ -125,6 +130,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             );
         }
     }
+    crm_api::jobs::check_start_log_std(args.algo, args.start_log_std)
+        .map_err(|message| anyhow::anyhow!("--start-log-std: {message}"))?;
     let (config, sac) = if args.algo == Algorithm::CrmSac {
         (PpoConfig::default(), read_json::<SacConfig>(&args.config)?)
     } else {
@@ -145,6 +152,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         imitation,
         // The command line names a file (`--fine-tune`), not a stored checkpoint.
         fine_tune: None,
+        start_log_std: args.start_log_std,
         objective: args.env.protocol,
         curriculum: args.curriculum,
         hold_s: args.env.hold_s,

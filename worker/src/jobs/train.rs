@@ -88,6 +88,8 @@ impl Trainer {
         }
         spec.config.validate()?;
         spec.sac.validate()?;
+        crm_api::jobs::check_start_log_std(spec.algorithm, spec.start_log_std)
+            .map_err(|message| anyhow::anyhow!("start_log_std {message}"))?;
         let benchmark = env.benchmark()?;
         let machine = match spec.algorithm {
             Algorithm::Ppo => env.machine_or(grasp_sim::spec::flat_spec())?,
@@ -101,6 +103,7 @@ impl Trainer {
         let spec_hash = machine.spec().hash();
         let layout = Layout::of(&machine);
         let is_sac = spec.algorithm == Algorithm::CrmSac;
+        let resuming = matches!(init, Some(Init::Resume(_)));
         let mut start_steps = 0;
         let mut resume_ppo = None;
         let mut resume_sac = None;
@@ -151,6 +154,11 @@ impl Trainer {
             if let Some(net) = &resume_ppo {
                 ppo.load_weights(net)
                     .context("resuming from the checkpoint")?;
+            }
+            // A run's start (fresh or fine-tuned) takes the job's noise; a resumed run keeps
+            // what it learned.
+            if let (Some(log_std), false) = (spec.start_log_std, resuming) {
+                ppo.net.set_log_std(log_std as f32)?;
             }
             Learner::Ppo(Box::new(ppo))
         };
@@ -389,5 +397,65 @@ impl Trainer {
         std::fs::rename(&partial, path)
             .with_context(|| format!("moving the checkpoint to {}", path.display()))?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(algorithm: Algorithm, start_log_std: Option<f64>) -> TrainSpec {
+        let mut spec: TrainSpec = serde_json::from_value(serde_json::json!({
+            "algorithm": algorithm.name(),
+            "steps": 64,
+            "envs": 1,
+            "task": "mouse-press",
+            "config": {"rollout_steps": 64, "init_log_std": -0.5},
+        }))
+        .expect("spec");
+        spec.start_log_std = start_log_std;
+        spec
+    }
+
+    fn log_std(trainer: &Trainer) -> Vec<f32> {
+        let Learner::Ppo(ppo) = &trainer.learner else {
+            panic!("a PPO learner");
+        };
+        ppo.net.std().expect("std").iter().map(|s| s.ln()).collect()
+    }
+
+    fn all_near(values: &[f32], expected: f32) -> bool {
+        values.iter().all(|v| (v - expected).abs() < 1e-6)
+    }
+
+    #[test]
+    fn start_log_std_sets_a_fresh_or_fine_tuned_policys_noise_and_a_resume_keeps_its_own() {
+        let env = EnvArgs::default();
+        let new = |start, init| Trainer::new(spec(Algorithm::CrmPpo, start), &env, init, None);
+        let fresh = new(None, None).expect("fresh");
+        assert!(all_near(&log_std(&fresh), -0.5), "{:?}", log_std(&fresh));
+        let started = new(Some(-2.0), None).expect("started");
+        assert!(all_near(&log_std(&started), -2.0));
+
+        let dir = std::env::temp_dir().join(format!("crm-start-log-std-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("crm-ppo.safetensors");
+        started.save(&path).expect("save");
+        // A fine-tune takes the job's noise, or keeps the checkpoint's without one.
+        let tuned = new(Some(-1.0), Some(Init::FineTune(&path))).expect("fine-tune");
+        assert!(all_near(&log_std(&tuned), -1.0));
+        let kept = new(None, Some(Init::FineTune(&path))).expect("fine-tune");
+        assert!(all_near(&log_std(&kept), -2.0));
+        // A resume goes on with what the run learned, whatever the spec says.
+        let resumed = new(Some(-1.0), Some(Init::Resume(&path))).expect("resume");
+        assert!(all_near(&log_std(&resumed), -2.0));
+        std::fs::remove_dir_all(&dir).ok();
+
+        for (algorithm, value) in [(Algorithm::CrmSac, -1.0), (Algorithm::CrmPpo, -6.0)] {
+            let err = Trainer::new(spec(algorithm, Some(value)), &env, None, None)
+                .err()
+                .expect("refused");
+            assert!(err.to_string().contains("start_log_std"), "{err}");
+        }
     }
 }
