@@ -109,10 +109,7 @@ impl ImitationSpec {
     /// Whether `algorithm` can start from a clone: the PPO learners of the grasping machine
     /// (the oracle acts in its stages; SAC's actor is another network).
     pub fn supports(algorithm: Algorithm) -> bool {
-        matches!(
-            algorithm,
-            Algorithm::CrmPpo | Algorithm::Ippo | Algorithm::Lppo
-        )
+        algorithm.is_machine_ppo()
     }
 
     /// Checks the fields; errors name the field inside `imitation`.

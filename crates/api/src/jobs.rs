@@ -48,6 +48,13 @@ impl Algorithm {
     pub fn parse(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|a| a.name() == name)
     }
+
+    /// Whether this is a PPO learner of the grasping machine (crm-ppo, ippo, lppo): one
+    /// Gaussian policy over the machine's stages, what behaviour cloning
+    /// ([`crate::ImitationSpec::supports`]) and `start_log_std` act on.
+    pub fn is_machine_ppo(self) -> bool {
+        matches!(self, Algorithm::CrmPpo | Algorithm::Ippo | Algorithm::Lppo)
+    }
 }
 
 /// Who executes the task's objective once the grasp is ready (DESIGN.md, "The paper's grasp
@@ -174,10 +181,7 @@ pub fn check_start_log_std(algorithm: Algorithm, value: Option<f64>) -> Result<(
     let Some(value) = value else {
         return Ok(());
     };
-    if !matches!(
-        algorithm,
-        Algorithm::CrmPpo | Algorithm::Ippo | Algorithm::Lppo
-    ) {
+    if !algorithm.is_machine_ppo() {
         return Err(format!(
             "is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo), not {}",
             algorithm.name()

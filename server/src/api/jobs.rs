@@ -262,8 +262,8 @@ async fn stored_checkpoint(
 
 /// A fine-tune names a stored checkpoint of the job's algorithm (404 when there is none,
 /// 409 when it holds another algorithm's policy: the request is well formed, the stored
-/// checkpoint does not fit it). Whether its machine and observation layout fit the job's world is the worker's check,
-/// which reads the file.
+/// checkpoint does not fit it). Whether its machine and observation layout fit the job's
+/// world is the worker's check, which reads the file.
 async fn check_fine_tune(state: &AppState, spec: &TrainSpec) -> Result<(), ApiError> {
     let Some(id) = spec.fine_tune else {
         return Ok(());
