@@ -142,8 +142,9 @@ impl PpoConfig {
         if !(0.0..=1000.0).contains(&self.target_kl) {
             return bad("target_kl", "must be in [0, 1000] (0 turns the guard off)");
         }
-        if !(self.init_log_std.is_finite() && (-5.0..=2.0).contains(&self.init_log_std)) {
-            return bad("init_log_std", "must be in [-5, 2]");
+        if !in_log_std_range(self.init_log_std) {
+            let (low, high) = LOG_STD_RANGE;
+            return bad("init_log_std", &format!("must be in [{low}, {high}]"));
         }
         within("update_epochs", self.update_epochs, 1, MAX_EPOCHS)?;
         within("rollout_steps", self.rollout_steps, 1, MAX_BATCH)
@@ -164,6 +165,16 @@ pub const MAX_WINDOW: usize = 10_000_000;
 pub const MAX_BUFFER: usize = 10_000_000;
 
 /// `value` in `[min, max]`, or an error naming `field` and the range.
+/// Lowest and highest log standard deviation a policy may start a run with: `init_log_std`,
+/// and a job's `start_log_std` (`crate::jobs::check_start_log_std`).
+pub const LOG_STD_RANGE: (f64, f64) = (-5.0, 2.0);
+
+/// Whether `value` is a finite log standard deviation within [`LOG_STD_RANGE`].
+pub fn in_log_std_range(value: f64) -> bool {
+    let (low, high) = LOG_STD_RANGE;
+    value.is_finite() && (low..=high).contains(&value)
+}
+
 fn within(field: &'static str, value: usize, min: usize, max: usize) -> Result<(), ConfigError> {
     if (min..=max).contains(&value) {
         Ok(())

@@ -171,12 +171,10 @@ pub fn check_hold_s(hold_s: Option<f64>) -> Result<(), String> {
     }
 }
 
-/// Lowest and highest `start_log_std`: `config.init_log_std`'s range.
-pub const START_LOG_STD_RANGE: (f64, f64) = (-5.0, 2.0);
-
-/// Checks a job's `start_log_std`: absent, or a value within [`START_LOG_STD_RANGE`] for a
-/// PPO learner of the grasping machine (crm-ppo, ippo, lppo), as `imitation` is: SAC's standard
-/// deviation is an output of its actor, and the flat ablation runs as the paper sets it.
+/// Checks a job's `start_log_std`: absent, or a value within `config.init_log_std`'s range
+/// ([`crate::config::LOG_STD_RANGE`]) for a PPO learner of the grasping machine (crm-ppo,
+/// ippo, lppo), as `imitation` is: SAC's standard deviation is an output of its actor, and the
+/// flat ablation runs as the paper sets it.
 pub fn check_start_log_std(algorithm: Algorithm, value: Option<f64>) -> Result<(), String> {
     let Some(value) = value else {
         return Ok(());
@@ -187,8 +185,8 @@ pub fn check_start_log_std(algorithm: Algorithm, value: Option<f64>) -> Result<(
             algorithm.name()
         ));
     }
-    let (low, high) = START_LOG_STD_RANGE;
-    if !(value.is_finite() && (low..=high).contains(&value)) {
+    if !crate::config::in_log_std_range(value) {
+        let (low, high) = crate::config::LOG_STD_RANGE;
         return Err(format!(
             "must be in [{low}, {high}] (a log standard deviation)"
         ));

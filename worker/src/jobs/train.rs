@@ -157,7 +157,7 @@ impl Trainer {
             }
             // A run's start (fresh or fine-tuned) takes the job's noise; a resumed run keeps
             // what it learned.
-            if let (Some(log_std), false) = (spec.start_log_std, resuming) {
+            if !resuming && let Some(log_std) = spec.start_log_std {
                 ppo.net.set_log_std(log_std as f32)?;
             }
             Learner::Ppo(Box::new(ppo))
