@@ -164,7 +164,6 @@ pub const MAX_WINDOW: usize = 10_000_000;
 /// Largest SAC replay buffer, in transitions (SB3's default is 1,000,000).
 pub const MAX_BUFFER: usize = 10_000_000;
 
-/// `value` in `[min, max]`, or an error naming `field` and the range.
 /// Lowest and highest log standard deviation a policy may start a run with: `init_log_std`,
 /// and a job's `start_log_std` (`crate::jobs::check_start_log_std`).
 pub const LOG_STD_RANGE: (f64, f64) = (-5.0, 2.0);
@@ -175,6 +174,7 @@ pub fn in_log_std_range(value: f64) -> bool {
     value.is_finite() && (low..=high).contains(&value)
 }
 
+/// `value` in `[min, max]`, or an error naming `field` and the range.
 fn within(field: &'static str, value: usize, min: usize, max: usize) -> Result<(), ConfigError> {
     if (min..=max).contains(&value) {
         Ok(())
