@@ -44,6 +44,8 @@ pub struct Judge {
     grasp_timeout_s: f32,
     crush_steps: usize,
     in_grasp: bool,
+    /// Whether the success test may pass ([`Judge::set_graded`]).
+    graded: bool,
     grasp_steps: usize,
     held_steps: usize,
     sustained_steps: usize,
@@ -129,6 +131,7 @@ impl Judge {
             grasp_timeout_s: config.grasp_timeout_s,
             crush_steps: config.crush_steps,
             in_grasp: false,
+            graded: true,
             grasp_steps: 0,
             held_steps: 0,
             sustained_steps: 0,
@@ -143,6 +146,16 @@ impl Judge {
     /// in every stage but `approach`, so a flat machine's single stage has them too.
     pub fn set_stage(&mut self, stage: &str) {
         self.in_grasp = stage != "approach";
+    }
+
+    /// Whether this step's success test may pass (the default). Under the scripted protocol
+    /// the environment grades only the arm's execution: the paper's policy approaches and
+    /// closes the hand and the arm performs the objective, so what the policy does to the
+    /// object before its grasp is ready (a twist forced by pushing the palm, a lift of its
+    /// own) is not the objective done, and the hold and sustain timers start with the arm.
+    /// Failures are judged either way.
+    pub fn set_graded(&mut self, graded: bool) {
+        self.graded = graded;
     }
 
     /// Why the object first left the workspace in this episode, if it did.
@@ -197,8 +210,8 @@ impl Judge {
         let lifted = s.displacement[2] >= self.lift_height;
         self.lifted_once |= lifted;
 
-        let done = if self.objective.is_hold() {
-            let steady = lifted && s.contacts >= 2 && s.speed < 0.3;
+        let passed = if self.objective.is_hold() {
+            let steady = self.graded && lifted && s.contacts >= 2 && s.speed < 0.3;
             self.held_steps = if steady { self.held_steps + 1 } else { 0 };
             let lift_part = (s.displacement[2] / self.lift_height).clamp(0.0, 1.0);
             let hold_part = (self.seconds(self.held_steps) / self.hold_s).clamp(0.0, 1.0);
@@ -210,7 +223,7 @@ impl Judge {
                 _ => s.press_force,
             };
             let target = self.required.abs();
-            self.sustained_steps = if measure >= target {
+            self.sustained_steps = if self.graded && measure >= target {
                 self.sustained_steps + 1
             } else {
                 0
@@ -218,6 +231,7 @@ impl Judge {
             self.progress = (measure / target).clamp(0.0, 1.0);
             self.seconds(self.sustained_steps) >= self.sustain_s - 1e-6
         };
+        let done = self.graded && passed;
 
         let mut cause = None;
         if self.in_grasp {
@@ -419,6 +433,51 @@ mod tests {
             fired[..steps - 1].iter().all(|f| !f) && fired[steps - 1],
             "{fired:?}"
         );
+    }
+
+    #[test]
+    fn an_ungraded_step_passes_no_test_and_the_timers_start_with_grading() {
+        for (objective, required, passing) in [
+            (
+                Objective::Twist,
+                Some(-0.2),
+                Snapshot {
+                    twist_torque: -0.25,
+                    contacts: 2,
+                    ..Snapshot::default()
+                },
+            ),
+            (Objective::Lift, None, held()),
+        ] {
+            let (mut judge, config) = grasping_judge(objective, required);
+            // Counted as the tests above count a hold and a sustain.
+            let steps = if objective.is_hold() {
+                (config.hold_s / config.control_dt()).round() as usize
+            } else {
+                (config.sustain_s / config.control_dt()).ceil() as usize
+            };
+            judge.set_graded(false);
+            for _ in 0..3 * steps {
+                assert!(!judge.judge(&passing).0.contains(&"succ"), "{objective:?}");
+            }
+            judge.set_graded(true);
+            let fired: Vec<bool> = (0..steps)
+                .map(|_| judge.judge(&passing).0.contains(&"succ"))
+                .collect();
+            assert!(
+                fired[..steps - 1].iter().all(|f| !f) && fired[steps - 1],
+                "{objective:?}: {fired:?}"
+            );
+        }
+        // Failures are judged whether or not the step is graded.
+        let (mut judge, config) = grasping_judge(Objective::Lift, None);
+        judge.set_graded(false);
+        let crush = Snapshot {
+            grip: 25.0,
+            ..held()
+        };
+        let failed = (0..config.crush_steps).any(|_| judge.judge(&crush).0.contains(&"fail"));
+        assert!(failed);
     }
 
     #[test]

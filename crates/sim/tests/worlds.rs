@@ -1,7 +1,8 @@
 //! Worlds from files: an MJCF hand (the built-in one) and a URDF hand (made by
 //! `scripts/make-test-world`) couple their joints as the paper does, mesh paths resolve,
-//! a non-convex mesh object is decomposed and rests on the table, and bad worlds are refused
-//! naming the file and the field.
+//! a non-convex mesh object is decomposed and rests on the table, bad worlds are refused
+//! naming the file and the field, and in the Adroit world only the arm's execution passes the
+//! judge.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -363,4 +364,31 @@ fn adroit_loads_with_mujocos_bodies_joints_and_couplings() {
     for (got, want) in &angles {
         assert!((got - want).abs() < 0.05, "Adroit joint angles {angles:?}");
     }
+}
+
+/// Adroit's grasp of the pan's handle never passes the ready test; the oracle's own objective
+/// phase then lifts the pan and holds it in the grasp stage. Under the paper's protocol that
+/// is not the objective done: only the arm's execution is graded, so no episode succeeds
+/// without the arm (before the judge graded only the arm, every one of these did).
+#[test]
+fn only_the_arms_execution_passes_the_judge() {
+    use grasp_sim::oracle::run_episode;
+    let assets = gymnasium_robotics_assets();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/adroit");
+    let world = World::load_with(&root, &Assets::parse(&assets.display().to_string()))
+        .expect("worlds/adroit");
+    let machine = world.machine().expect("the grasping machine");
+    let task = world.benchmark.task_index("pan-lever").expect("pan-lever");
+    let mut ended = Vec::new();
+    for seed in 0..3 {
+        let env = GraspEnv::new(world.benchmark.clone(), SimConfig::default());
+        let (episode, env) = run_episode(env, machine.clone(), task, seed).expect("episode");
+        assert!(
+            episode.outcome != "success" || env.executed(),
+            "seed {seed}: a success without the arm: {episode:?}"
+        );
+        ended.push(episode.label);
+    }
+    // The episodes end (a failure or a success), not at the episode limit.
+    assert!(ended.iter().all(|l| l != "truncated"), "{ended:?}");
 }

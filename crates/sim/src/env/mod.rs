@@ -516,6 +516,8 @@ impl GraspEnv {
             press_force: -contacts.force.z,
         };
         let judge = self.judge.as_mut().ok_or(Error::NotReset)?;
+        // The paper's protocol grades the arm's execution, not the policy's pushes before it.
+        judge.set_graded(self.config.protocol == Protocol::Learned || self.executed);
         let (events, cause) = judge.judge(&snapshot);
         if cause.is_some() {
             self.last_fail = cause;
