@@ -426,13 +426,22 @@ mod tests {
             contacts: 2,
             ..Snapshot::default()
         };
-        let fired: Vec<bool> = (0..steps)
-            .map(|_| judge.judge(&right_way).0.contains(&"succ"))
-            .collect();
-        assert!(
-            fired[..steps - 1].iter().all(|f| !f) && fired[steps - 1],
-            "{fired:?}"
-        );
+        let fired = succ_per_step(&mut judge, &right_way, steps);
+        assert!(only_the_last(&fired), "{fired:?}");
+    }
+
+    /// Judges `s` for `steps` control steps; whether `succ` fired in each.
+    fn succ_per_step(judge: &mut Judge, s: &Snapshot, steps: usize) -> Vec<bool> {
+        (0..steps)
+            .map(|_| judge.judge(s).0.contains(&"succ"))
+            .collect()
+    }
+
+    /// Whether `succ` fired in the last step and in none before it.
+    fn only_the_last(fired: &[bool]) -> bool {
+        fired
+            .split_last()
+            .is_some_and(|(last, before)| *last && before.iter().all(|f| !f))
     }
 
     #[test]
@@ -461,13 +470,8 @@ mod tests {
                 assert!(!judge.judge(&passing).0.contains(&"succ"), "{objective:?}");
             }
             judge.set_graded(true);
-            let fired: Vec<bool> = (0..steps)
-                .map(|_| judge.judge(&passing).0.contains(&"succ"))
-                .collect();
-            assert!(
-                fired[..steps - 1].iter().all(|f| !f) && fired[steps - 1],
-                "{objective:?}: {fired:?}"
-            );
+            let fired = succ_per_step(&mut judge, &passing, steps);
+            assert!(only_the_last(&fired), "{objective:?}: {fired:?}");
         }
         // Failures are judged whether or not the step is graded.
         let (mut judge, config) = grasping_judge(Objective::Lift, None);

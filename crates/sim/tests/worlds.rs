@@ -332,6 +332,12 @@ fn gymnasium_robotics_assets() -> PathBuf {
     ))
 }
 
+/// `worlds/adroit`, its MJCF and meshes read from gymnasium-robotics' `assets`.
+fn adroit_world(assets: &Path) -> World {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/adroit");
+    World::load_with(&root, &Assets::parse(&assets.display().to_string())).expect("worlds/adroit")
+}
+
 #[test]
 fn adroit_loads_with_mujocos_bodies_joints_and_couplings() {
     use grasp_sim::hand::description::Description;
@@ -355,9 +361,7 @@ fn adroit_loads_with_mujocos_bodies_joints_and_couplings() {
     assert_eq!(mimic.leader, "FFJ1");
     assert!((mimic.ratio - 0.00805 / 0.00705).abs() < 1e-5, "{mimic:?}");
 
-    let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/adroit");
-    let world = World::load_with(&world, &Assets::parse(&assets.display().to_string()))
-        .expect("worlds/adroit");
+    let world = adroit_world(&assets);
     // The arm (slides, rotations) and the wrist joints are dropped; our wrist holds the palm.
     assert_eq!(world.benchmark.hand.revolute_joints(), 22);
     let angles = index_angles(&world, "mug-wrap", 0.6);
@@ -373,10 +377,7 @@ fn adroit_loads_with_mujocos_bodies_joints_and_couplings() {
 #[test]
 fn only_the_arms_execution_passes_the_judge() {
     use grasp_sim::oracle::run_episode;
-    let assets = gymnasium_robotics_assets();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/adroit");
-    let world = World::load_with(&root, &Assets::parse(&assets.display().to_string()))
-        .expect("worlds/adroit");
+    let world = adroit_world(&gymnasium_robotics_assets());
     let machine = world.machine().expect("the grasping machine");
     let task = world.benchmark.task_index("pan-lever").expect("pan-lever");
     let mut ended = Vec::new();
