@@ -36,6 +36,9 @@ pub struct ContactMetrics {
     pub torque: Vec3,
     /// Sum of normal force magnitudes (N): the grip.
     pub grip: f32,
+    /// The object's centre of mass about which `torque` is taken (m, world; the last
+    /// physics step's when the metrics are a control step's mean).
+    pub centre: Vec3,
 }
 
 impl ContactMetrics {
@@ -86,12 +89,12 @@ impl ContactMetrics {
                 .all(|&(_, normal, friction, mu)| friction <= (1.0 - margin) * mu * normal)
     }
 
-    /// Torque of the contact forces about an axis through `pivot` (N m).
+    /// Torque of the contact forces about an axis through `pivot` (N m), from the summed
+    /// `force` and `torque`: so it is the control step's mean wherever those are (the
+    /// contact points are the last physics step's alone, and a twist read from them jumps
+    /// with the solver between 0 and twice its mean).
     pub fn torque_about(&self, pivot: Vec3, axis: Vec3) -> f32 {
-        self.points
-            .iter()
-            .map(|p| (p.position - pivot).cross(p.force).dot(axis))
-            .sum()
+        (self.torque + (self.centre - pivot).cross(self.force)).dot(axis)
     }
 }
 
@@ -110,6 +113,7 @@ pub fn object_contacts(
         return metrics;
     };
     let com = body.center_of_mass();
+    metrics.centre = com;
     for pair in world.narrow_phase.contact_pairs() {
         let (Some(c1), Some(c2)) = (
             world.colliders.get(pair.collider1),
@@ -170,5 +174,74 @@ impl ContactMetrics {
         self.force *= factor;
         self.torque *= factor;
         self.grip *= factor;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Metrics of contact points as `object_contacts` sums them, about `centre`.
+    fn metrics_of(centre: Vec3, points: &[(Vec3, Vec3)]) -> ContactMetrics {
+        let mut metrics = ContactMetrics {
+            centre,
+            ..ContactMetrics::default()
+        };
+        for &(position, force) in points {
+            metrics.points.push(ContactPoint {
+                position,
+                force,
+                normal_force: force.length(),
+                friction_force: 0.0,
+                friction_vector: Vec3::ZERO,
+                friction: 1.0,
+                other_body: None,
+            });
+            metrics.force += force;
+            metrics.torque += (position - centre).cross(force);
+            metrics.grip += force.length();
+        }
+        metrics
+    }
+
+    fn points_about(metrics: &ContactMetrics, pivot: Vec3, axis: Vec3) -> f32 {
+        metrics
+            .points
+            .iter()
+            .map(|p| (p.position - pivot).cross(p.force).dot(axis))
+            .sum()
+    }
+
+    #[test]
+    fn the_torque_about_an_axis_is_the_points_torque_and_a_mean_of_means() {
+        let (pivot, axis) = (Vec3::new(0.1, -0.2, 0.0), Vec3::Z);
+        let centre = Vec3::new(0.12, -0.18, 0.05);
+        // Two fingers on either side of a cap pushed round it, then the solver's next physics
+        // step with half the push, carried by one of them: the control step's mean is 0.15.
+        let first = metrics_of(
+            centre,
+            &[
+                (Vec3::new(0.15, -0.2, 0.05), Vec3::new(-2.0, 3.0, 0.0)),
+                (Vec3::new(0.05, -0.2, 0.06), Vec3::new(2.0, -1.0, 0.5)),
+            ],
+        );
+        let second = metrics_of(
+            centre,
+            &[(Vec3::new(0.15, -0.2, 0.05), Vec3::new(0.0, 2.0, 0.0))],
+        );
+        for metrics in [&first, &second] {
+            let expected = points_about(metrics, pivot, axis);
+            assert!((metrics.torque_about(pivot, axis) - expected).abs() < 1e-6);
+        }
+        let mut mean = ContactMetrics::default();
+        mean.accumulate(&first);
+        mean.accumulate(&second);
+        mean.scale(0.5);
+        let (mut last, expected) = (second.clone(), 0.5 * (0.2 + 0.1));
+        last.force = mean.force;
+        last.torque = mean.torque;
+        assert!((points_about(&first, pivot, axis) - 0.2).abs() < 1e-6);
+        assert!((points_about(&second, pivot, axis) - 0.1).abs() < 1e-6);
+        assert!((last.torque_about(pivot, axis) - expected).abs() < 1e-6);
     }
 }

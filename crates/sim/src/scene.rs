@@ -8,6 +8,7 @@ use rapier3d::prelude::*;
 
 use crate::benchmark::{Axis, Object, Shape, Task};
 use crate::config::SimConfig;
+use crate::contacts::ContactMetrics;
 use crate::hand::{HAND_GROUP, Hand, HandModel, OBJECT_GROUP, TABLE_GROUP};
 use crate::stiction::Stiction;
 
@@ -35,6 +36,17 @@ pub struct Scene {
     pub grasp_rotation: Rotation,
     /// The mount's position at reset (world).
     pub mount_start: Vec3,
+}
+
+impl Scene {
+    /// Torque (N m) of `contacts` about the object's twist axis: its vertical through its
+    /// start position, the hinge of an anchored object.
+    pub fn twist_torque(&self, contacts: &ContactMetrics) -> f32 {
+        contacts.torque_about(
+            self.object_start.translation,
+            self.object_start.rotation * Vec3::Z,
+        )
+    }
 }
 
 /// A rapier collider for one primitive part.

@@ -1,10 +1,11 @@
 //! The arm's objective controllers: what the arm does once the grasp is ready (the paper's
 //! protocol runs them inside the environment step; the oracle runs them as its last phase).
 //! Lift (along the task's motion) to just above the success height, twist along the
-//! tangent, or press down under force regulation. The fingers keep the grasp they were
-//! given: they open a little when the grip nears the fragility limit and close a little when
-//! it relaxes under 80% of the grip they are to `hold` (the grip at the hand-over for the
-//! environment's execution, [`wanted_grip`] for the oracle). A loose grasp stays loose.
+//! tangent (backing off when the grip nears the fragility limit), or press down under force
+//! regulation. The fingers keep the grasp they were given: they open a little when the grip
+//! nears the fragility limit and close a little when it relaxes under 80% of the grip they
+//! are to `hold` (the grip at the hand-over for the environment's execution, [`wanted_grip`]
+//! for the oracle). A loose grasp stays loose.
 
 use rapier3d::prelude::Vec3;
 
@@ -20,6 +21,11 @@ pub const FINGER_SCALE: f32 = 0.1;
 const LIFT_SPEED: f32 = 0.6;
 /// Height (m) above the success test's lift height to which a held object is raised.
 const LIFT_MARGIN: f32 = 0.02;
+/// Fractions of the grasp step with which a twist pushes along the tangent and backs off
+/// when the grip nears the fragility limit (0.2: the back-off that took the paper world's
+/// `t20-dispenser-twist` from 18 crushed episodes of 100 to none, docs/WORLDS.md).
+const TWIST_PUSH: f32 = 0.5;
+const TWIST_BACK_OFF: f32 = 0.2;
 
 fn unit(value: f32, scale: f32) -> f32 {
     (value / scale).clamp(-1.0, 1.0)
@@ -77,8 +83,17 @@ pub fn objective_action(env: &GraspEnv, hold: f32) -> Vec<f32> {
             };
         }
         Objective::Twist => {
+            // Push along the tangent, and back off when the grip nears the fragility limit:
+            // a push on an object that resists it squeezes the fingers, and pushing on would
+            // crush the object before the test's time. (Holding still once the torque is
+            // there lets it relax under a part that turns.)
+            let speed = if grip > 0.8 * limit {
+                -TWIST_BACK_OFF
+            } else {
+                TWIST_PUSH
+            };
             for axis in 0..3 {
-                action[axis] = 0.5 * motion[axis];
+                action[axis] = speed * motion[axis];
             }
         }
         _ => {

@@ -4,7 +4,12 @@
 
 use std::sync::Arc;
 
+use rapier3d::prelude::Vec3;
+
+use grasp_sim::benchmark::Fragility;
+use grasp_sim::events::FailCause;
 use grasp_sim::oracle::{Oracle, run_episode};
+use grasp_sim::script::{objective_action, wanted_grip};
 use grasp_sim::spec::grasping_machine;
 use grasp_sim::{Benchmark, GraspEnv, Protocol, SimConfig, TaskChoice};
 
@@ -96,5 +101,66 @@ fn a_scripted_lift_of_a_firmly_held_box_succeeds_and_of_a_loosely_held_one_fails
         events.contains(&"fail") && !events.contains(&"succ"),
         "{events:?} ({:?})",
         loose.last_fail()
+    );
+}
+
+/// The arm's twist, driven step by step (the learned protocol, so that no step hands over),
+/// on a valve made fragile so that its push reaches the grip limit: the palm pushes along
+/// the tangent, backs off when the grip nears the limit, and the valve is not crushed.
+#[test]
+fn a_scripted_twist_backs_off_before_the_grip_crushes_the_object() {
+    let mut benchmark = Benchmark::builtin();
+    let task = task_index(&benchmark, "valve-twist");
+    let valve = benchmark.tasks[task].object.clone();
+    let object = benchmark
+        .objects
+        .iter_mut()
+        .find(|o| o.name == valve)
+        .expect("the valve");
+    object.fragility = Fragility::Fragile;
+    let limit = Fragility::Fragile.grasp_force_limit();
+    let benchmark = Arc::new(benchmark);
+    let config = SimConfig {
+        protocol: Protocol::Learned,
+        ..SimConfig::deterministic()
+    };
+    let mut env = GraspEnv::new(benchmark.clone(), config);
+    env.set_task_choice(TaskChoice::Fixed(task)).expect("task");
+    let mut crm_env = crm::CrmEnv::new(grasping_machine(), env, crm::RewardMode::Crm);
+    let (mut stage, _) = crm_env.reset(0).expect("reset");
+    let mut oracle = Oracle::new();
+    let motion = Vec3::from(benchmark.tasks[task].motion);
+    let (mut pushed, mut backed) = (0, 0);
+    for _ in 0..400 {
+        let name = crm_env.machine().stage_name(stage).to_string();
+        let env = crm_env.env();
+        let action = oracle.act(env, &name);
+        if name == "grasp" && action == objective_action(env, wanted_grip(env)) {
+            let start = env.scene().expect("scene").object_start.rotation;
+            let along = Vec3::new(action[0], action[1], action[2]).dot(start * motion);
+            let grip = env.hand_contacts().grip;
+            if grip > 0.8 * limit {
+                assert!(along < 0.0, "no back-off at a grip of {grip} N: {along}");
+                backed += 1;
+            } else {
+                assert!(along > 0.0, "no push at a grip of {grip} N: {along}");
+                pushed += 1;
+            }
+        }
+        let step = crm_env.step(&action).expect("step");
+        stage = step.stage;
+        if step.done || step.truncated {
+            break;
+        }
+    }
+    let env = crm_env.env();
+    assert_ne!(
+        env.last_fail(),
+        Some(FailCause::Crushed),
+        "pushed {pushed}, backed off {backed}"
+    );
+    assert!(
+        pushed > 0 && backed > 0,
+        "pushed {pushed}, backed off {backed}"
     );
 }

@@ -500,10 +500,7 @@ impl GraspEnv {
         let displacement = pose.translation - scene.object_start.translation;
         let up = pose.rotation * Vec3::Z;
         let limit = object.fragility.grasp_force_limit();
-        let twist_torque = contacts.torque_about(
-            scene.object_start.translation,
-            scene.object_start.rotation * Vec3::Z,
-        );
+        let twist_torque = scene.twist_torque(contacts);
         let snapshot = Snapshot {
             arrive_error: (grasp_point - grasp_location).to_array(),
             arrive_angle,
