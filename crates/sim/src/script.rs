@@ -51,10 +51,12 @@ pub fn objective_action(env: &GraspEnv, hold: f32) -> Vec<f32> {
         .fragility
         .grasp_force_limit();
     let grip = parts.grip * limit;
+    // Near the fragility limit the fingers open, and a twist's palm backs off.
+    let near_limit = grip > 0.8 * limit;
     // Keep the grip under the fragility limit and near the grip to hold.
     for finger in 0..5 {
         if shape[finger].active && task.objective != Objective::Press {
-            action[3 + finger] = if grip > 0.8 * limit {
+            action[3 + finger] = if near_limit {
                 -0.3
             } else if grip < 0.8 * hold {
                 0.3
@@ -88,7 +90,7 @@ pub fn objective_action(env: &GraspEnv, hold: f32) -> Vec<f32> {
             // a push on an object that resists it squeezes the fingers, and pushing on would
             // crush the object before the test's time. (Holding still once the torque is
             // there lets it relax under a part that turns.)
-            let speed = if grip > 0.8 * limit {
+            let speed = if near_limit {
                 -TWIST_BACK_OFF
             } else {
                 TWIST_PUSH
