@@ -54,6 +54,11 @@ const ASSETS: &[(&str, &str, &str)] = &[
         include_str!("../../web/src/models.js"),
     ),
     (
+        "lineage.js",
+        "text/javascript",
+        include_str!("../../web/src/lineage.js"),
+    ),
+    (
         "sweeps.js",
         "text/javascript",
         include_str!("../../web/src/sweeps.js"),

@@ -2,6 +2,7 @@
 // coordinator starts on a new data folder, and uploads): their facts, download, Evaluate,
 // their evaluations, and an upload form.
 import { el, errorBox, fmtBytes, fmtTime, getJson, onChange, sendBytes } from './api.js';
+import { lineageButton } from './lineage.js';
 import { evaluationTable, queueEvaluation } from './run.js';
 
 export async function renderModels(main) {
@@ -9,6 +10,7 @@ export async function renderModels(main) {
   const message = el('div', { class: 'message', role: 'status' });
   const rows = el('tbody');
   const evaluations = el('div');
+  const lineage = el('section', { id: 'lineage-view' });
   const episodesInput = el('input', { type: 'text', inputmode: 'numeric', value: '100', name: 'eval-episodes', size: 6 });
   const meanInput = el('input', { type: 'checkbox', name: 'eval-deterministic' });
   const fileInput = el('input', { type: 'file', id: 'model-file', accept: '.safetensors' });
@@ -25,6 +27,7 @@ export async function renderModels(main) {
       el('label', {}, meanInput, ' mean action instead of sampled'), '); the result appears under Evaluations.'),
     el('table', { id: 'models' }, el('thead', {}, el('tr', {},
       ['id', 'name', 'algorithm', 'trained steps', 'size', 'added', 'sha256', ''].map((h) => el('th', {}, h)))), rows),
+    lineage,
     el('h2', {}, 'Evaluations'), evaluations);
 
   const showError = (err) => message.replaceChildren(errorBox(err.field ? new Error(`${err.field}: ${err.message}`) : err));
@@ -56,7 +59,8 @@ export async function renderModels(main) {
       el('td', {}, fmtBytes(c.size)), el('td', {}, fmtTime(c.created_at)),
       el('td', {}, el('code', { title: c.sha256 || '' }, (c.sha256 || '').slice(0, 12))),
       el('td', {}, el('a', { href: `/api/v1/checkpoints/${c.id}/download`, class: 'button small', download: true }, 'Download'), ' ',
-        el('button', { type: 'button', class: 'small', onclick: () => queueEvaluation(c, episodesInput, meanInput, message) }, 'Evaluate')))));
+        el('button', { type: 'button', class: 'small', onclick: () => queueEvaluation(c, episodesInput, meanInput, message) }, 'Evaluate'), ' ',
+        lineageButton(c, lineage)))));
     if (!list.checkpoints.length) {
       rows.append(el('tr', {}, el('td', { colspan: 8, class: 'muted' }, 'No model yet: upload a checkpoint above.')));
     }

@@ -1,9 +1,10 @@
 // A run: live training curves with smoothing and x-axis controls, its checkpoints (download,
-// evaluate), its evaluations and its recent episodes.
+// evaluate, how made), its evaluations and its recent episodes.
 import {
   ApiError, asObject, badge, chartControls, chartSettings, drawChart, duration, el, errorBox, fmtNum,
   fmtBytes, fmtTime, getJson, notFound, onChange, phaseOf, phaseText, send, tasksOf,
 } from './api.js';
+import { lineageButton } from './lineage.js';
 
 const METRICS = ['success', 'task_success', 'episode_length', 'return', 'reward_split', 'stages', 'entropy', 'value_loss', 'learning_rate'];
 
@@ -22,6 +23,7 @@ export async function renderRun(main, idText) {
   const figures = METRICS.map((metric) => el('figure', { class: 'chart', 'data-metric': metric }));
   const message = el('div', { class: 'message', role: 'status' });
   const checkpoints = el('tbody');
+  const lineage = el('section', { id: 'lineage-view' });
   const evaluations = el('div');
   const episodes = el('div', { id: 'episodes-section' });
   const recording = el('div', { id: 'recording' });
@@ -47,6 +49,7 @@ export async function renderRun(main, idText) {
       el('label', {}, meanInput, ' mean action instead of sampled'), '); the result appears under Evaluations.'),
     el('table', { id: 'checkpoints' }, el('thead', {}, el('tr', {},
       ['id', 'steps', 'size', 'saved', ''].map((h) => el('th', {}, h)))), checkpoints),
+    lineage,
     el('h2', {}, 'Evaluations'), evaluations,
     el('h2', {}, 'Rerun recording'), recording,
     el('h2', {}, 'Episodes and their stage transitions'), episodes);
@@ -90,7 +93,8 @@ export async function renderRun(main, idText) {
       el('td', {}, c.id), el('td', {}, c.steps.toLocaleString()), el('td', {}, `${Math.round(c.size / 1024)} KiB`),
       el('td', {}, fmtTime(c.created_at)),
       el('td', {}, el('a', { href: `/api/v1/checkpoints/${c.id}/download`, class: 'button small', download: true }, 'Download'), ' ',
-        el('button', { type: 'button', class: 'small', onclick: () => evaluate(c) }, 'Evaluate')))));
+        el('button', { type: 'button', class: 'small', onclick: () => evaluate(c) }, 'Evaluate'), ' ',
+        lineageButton(c, lineage)))));
     if (!d.checkpoints.length) checkpoints.append(el('tr', {}, el('td', { colspan: 5, class: 'muted' }, 'No checkpoint yet.')));
     evaluations.replaceChildren(evaluationTable(d.evaluations));
     recording.replaceChildren(...recordingInfo(run, d.recording));

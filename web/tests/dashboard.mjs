@@ -165,6 +165,13 @@ check('a run page draws its curves, lists checkpoints and evaluations', async ()
   const href = await page.getAttribute('#checkpoints tr[data-checkpoint] a', 'href');
   const download = await fetch(`${base}${href}`);
   assert.equal(download.status, 200);
+  // "How made" shows the checkpoint's lineage: this run's one stage, as its job asked.
+  await page.click('#checkpoints tr[data-checkpoint] button:has-text("How made")');
+  await page.waitForSelector('#lineage tbody tr[data-stage="1"]');
+  const stage = await page.$$eval('#lineage tbody tr[data-stage="1"] td', (tds) => tds.map((td) => td.textContent));
+  assert.deepEqual(stage.slice(1, 3), ['train', 'crm-ppo'], JSON.stringify(stage));
+  assert.equal(stage[5], '0', JSON.stringify(stage));
+  assert.equal((await page.$$('#lineage tbody tr')).length, 1);
   assert.ok((await page.$$('#evaluations tbody tr')).length >= 1, 'an evaluation row');
   // A finished evaluation lists its success per task and how its episodes ended.
   const runData = await api(`/api/v1/runs/${runA}`);

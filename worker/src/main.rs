@@ -51,6 +51,9 @@ enum Command {
     /// Worlds as folders: check one.
     #[command(subcommand)]
     World(commands::world::WorldCommand),
+    /// Checkpoints: what one is and how it was made.
+    #[command(subcommand)]
+    Checkpoint(commands::checkpoint::CheckpointCommand),
 }
 
 fn main() -> std::process::ExitCode {
@@ -72,6 +75,7 @@ fn main() -> std::process::ExitCode {
         Command::Topology(command) => commands::topology::run(command),
         Command::Bench(command) => commands::bench::run(command),
         Command::World(command) => commands::world::run(command),
+        Command::Checkpoint(command) => commands::checkpoint::run(command),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

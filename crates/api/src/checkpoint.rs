@@ -33,6 +33,9 @@ pub struct CheckpointInfo {
     pub seed: u64,
     /// Environment steps trained.
     pub steps: u64,
+    /// How it was made: one object per training run that led to it, oldest first
+    /// (`crm_learn::LineageStage`); empty for a file written without a lineage.
+    pub lineage: Vec<serde_json::Value>,
 }
 
 /// Why a file is not a checkpoint this service can use.
@@ -74,6 +77,8 @@ struct Header {
     #[serde(default)]
     seed: u64,
     steps: u64,
+    #[serde(default)]
+    lineage: Vec<serde_json::Value>,
 }
 
 /// How many leading bytes of a file [`inspect`] needs: the 8-byte length and the JSON
@@ -143,6 +148,7 @@ pub fn inspect(prefix: &[u8], file_len: u64) -> Result<CheckpointInfo, Checkpoin
         spec_hash: header.spec_hash,
         seed: header.seed,
         steps: header.steps,
+        lineage: header.lineage,
     })
 }
 

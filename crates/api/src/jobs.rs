@@ -154,6 +154,28 @@ pub struct TrainSpec {
     /// (docs/LEARNING.md). Evaluations ask 5 s unless they say otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hold_s: Option<f64>,
+    /// Training's shortcut through the hold (see [`check_settle_s`]): a hold-task grasp whose
+    /// object has rested in the palm (within 1 mm and 0.01 rad) for this many seconds of the
+    /// steady hold passes then, instead of after the full hold. Absent: off. Outcomes agree
+    /// with the full hold in at least 99.5% of episodes at 0.5 s (docs/BENCHMARKS.md, `crm
+    /// bench hold`); evaluations always run the full hold.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle_s: Option<f64>,
+}
+
+/// Shortest and longest rest (s) a job's `settle_s` may ask: a few control steps, and less
+/// than the paper's 5 s hold.
+pub const SETTLE_S_RANGE: (f64, f64) = (0.1, 5.0);
+
+/// Checks a job's `settle_s`: absent, or seconds within [`SETTLE_S_RANGE`].
+pub fn check_settle_s(settle_s: Option<f64>) -> Result<(), String> {
+    let (low, high) = SETTLE_S_RANGE;
+    match settle_s {
+        Some(s) if !(low..=high).contains(&s) => Err(format!(
+            "must be between {low} and {high} seconds (0.5 s agrees with the full hold)"
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// Shortest and longest steady hold (s) a job may ask: at least a few control steps, and room

@@ -1,6 +1,6 @@
 //! Checkpoints: the networks' tensors in one safetensors file whose metadata carries a JSON
 //! header (algorithm, CRM spec hash, environment version, seed, steps, network layout,
-//! config). Loading refuses a file that is not a checkpoint, or one made for another spec or
+//! config, lineage). Loading refuses a file that is not a checkpoint, or one made for another spec or
 //! environment version, and says which.
 
 use std::collections::HashMap;
@@ -49,6 +49,10 @@ pub struct CheckpointHeader {
     /// sensors: `grasp_sim::World::hash`); absent: the built-in world's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub world_hash: Option<String>,
+    /// How it was made: every training run that led to it, oldest first, this one last
+    /// (see `lineage.rs`). Empty in checkpoints written before headers kept it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lineage: Vec<crate::lineage::LineageStage>,
 }
 
 /// What CRM-SAC checkpoints say in `activation` (older ones, with `tanh`, say nothing).
@@ -319,7 +323,73 @@ mod tests {
             activation: None,
             world: None,
             world_hash: None,
+            lineage: vec![
+                stage("train", None, None),
+                stage(
+                    "fine-tune",
+                    Some("ab".repeat(32)),
+                    Some(serde_json::json!({"demo_steps": 120, "epochs": 3})),
+                ),
+            ],
         }
+    }
+
+    fn stage(
+        kind: &str,
+        parent: Option<String>,
+        imitation: Option<serde_json::Value>,
+    ) -> crate::LineageStage {
+        crate::LineageStage {
+            kind: kind.into(),
+            algorithm: "crm-ppo".into(),
+            steps: 500,
+            wall_s: 61.5,
+            seed: 5,
+            parent_sha256: parent,
+            world: Some("crm".into()),
+            world_hash: Some("f00d".into()),
+            imitation,
+            command: Some(vec![
+                "crm".into(),
+                "train".into(),
+                "--seed".into(),
+                "5".into(),
+            ]),
+            job: serde_json::json!({"algorithm": "crm-ppo", "steps": 500}),
+        }
+    }
+
+    #[test]
+    fn a_child_inherits_its_parents_lineage_or_a_stage_made_from_an_old_header() {
+        let net = ActorCritic::new(
+            Layout {
+                state_width: 2,
+                stages: 5,
+                actions: 8,
+            },
+            &[4],
+            1,
+        )
+        .expect("net");
+        let parent = header(&net);
+        assert_eq!(crate::LineageStage::inherited(&parent), parent.lineage);
+        let old = CheckpointHeader {
+            lineage: Vec::new(),
+            ..parent
+        };
+        let made = crate::LineageStage::inherited(&old);
+        assert_eq!(made.len(), 1);
+        assert_eq!(made[0].kind, "unrecorded");
+        assert_eq!((made[0].steps, made[0].seed), (1000, 5));
+        let text = crate::lineage::describe(&header(&net).lineage);
+        assert!(
+            text.contains("2. fine-tune crm-ppo: 500 steps, 1.0 min, seed 5"),
+            "{text}"
+        );
+        assert!(text.contains(&format!(
+            "from the checkpoint with sha256 {}",
+            "ab".repeat(32)
+        )));
     }
 
     fn temp(name: &str) -> std::path::PathBuf {
@@ -433,6 +503,7 @@ mod tests {
             activation: None,
             world: None,
             world_hash: None,
+            lineage: Vec::new(),
         };
         let path = temp("sac.safetensors");
         Checkpoint::save_sac(&nets, &header, &path).expect("save");

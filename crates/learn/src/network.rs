@@ -84,6 +84,21 @@ pub fn encode_normalized(
     norm: Option<&ObsNorm>,
     device: &Device,
 ) -> Result<Tensor> {
+    let data = encode_rows(layout, states, stages, norm)?;
+    Ok(Tensor::from_vec(
+        data,
+        (states.len(), layout.input_width()),
+        device,
+    )?)
+}
+
+/// [`encode_normalized`] into a host buffer, `[states, input_width]` row-major.
+pub(crate) fn encode_rows(
+    layout: Layout,
+    states: &[Vec<f32>],
+    stages: &[usize],
+    norm: Option<&ObsNorm>,
+) -> Result<Vec<f32>> {
     if states.len() != stages.len() {
         return Err(Error::Length {
             what: "stages",
@@ -116,7 +131,7 @@ pub fn encode_normalized(
         }
         data[base + layout.state_width + stage] = 1.0;
     }
-    Ok(Tensor::from_vec(data, (states.len(), width), device)?)
+    Ok(data)
 }
 
 impl std::fmt::Debug for ActorCritic {
@@ -220,6 +235,11 @@ impl ActorCritic {
     /// their stages.
     pub fn input(&self, states: &[Vec<f32>], stages: &[usize]) -> Result<Tensor> {
         encode_normalized(self.layout, states, stages, Some(&self.norm), &self.device)
+    }
+
+    /// [`Self::input`] into a host buffer, `[states, input_width]` row-major.
+    pub(crate) fn input_rows(&self, states: &[Vec<f32>], stages: &[usize]) -> Result<Vec<f32>> {
+        encode_rows(self.layout, states, stages, Some(&self.norm))
     }
 
     /// Policy means `[batch, actions]`.

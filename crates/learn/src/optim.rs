@@ -43,7 +43,7 @@ pub struct Adam {
 }
 
 /// Whether a parameter belongs to the critic group (by its checkpoint name).
-fn is_critic(name: &str) -> bool {
+pub(crate) fn is_critic(name: &str) -> bool {
     name.starts_with("critic.")
 }
 
@@ -103,20 +103,11 @@ impl Adam {
             actor: actor.sqrt() as f32,
             critic: critic.sqrt() as f32,
         };
-        let scale = |norm: f32| {
-            if norm > max_norm {
-                max_norm / (norm + 1e-6)
-            } else {
-                1.0
-            }
-        };
-        let (actor_scale, critic_scale) = (scale(norms.actor), scale(norms.critic));
-        self.t += 1;
-        let correction1 = 1.0 - BETA1.powi(self.t);
-        let correction2 = 1.0 - BETA2.powi(self.t);
-        let step_size = (self.learning_rate / correction1) as f32;
-        let sqrt_correction2 = correction2.sqrt() as f32;
-        let (b1, b2) = (BETA1 as f32, BETA2 as f32);
+        let (actor_scale, critic_scale) = (
+            clip_scale(norms.actor, max_norm),
+            clip_scale(norms.critic, max_norm),
+        );
+        let adam = self.next_step();
         for (k, ((name, var), grad)) in params.iter().zip(flat).enumerate() {
             let Some(grad) = grad else { continue };
             let g_scale = if is_critic(name) {
@@ -125,17 +116,77 @@ impl Adam {
                 actor_scale
             };
             let mut values = var.as_tensor().flatten_all()?.to_vec1::<f32>()?;
-            let (m, v) = (&mut self.m[k], &mut self.v[k]);
-            for i in 0..values.len() {
-                let g = grad[i] * g_scale;
-                m[i] = b1 * m[i] + (1.0 - b1) * g;
-                v[i] = b2 * v[i] + (1.0 - b2) * g * g;
-                let denom = v[i].sqrt() / sqrt_correction2 + self.eps;
-                values[i] -= step_size * m[i] / denom;
-            }
+            adam.apply(&mut values, &grad, g_scale, &mut self.m[k], &mut self.v[k]);
             var.set(&Tensor::from_vec(values, var.shape(), var.device())?)?;
         }
         Ok(norms)
+    }
+
+    /// Counts one step and returns its bias-corrected coefficients, for an update that keeps
+    /// its parameters and moments on the host (`fused`).
+    pub(crate) fn next_step(&mut self) -> AdamStep {
+        self.t += 1;
+        let correction1 = 1.0 - BETA1.powi(self.t);
+        let correction2 = 1.0 - BETA2.powi(self.t);
+        AdamStep {
+            step_size: (self.learning_rate / correction1) as f32,
+            sqrt_correction2: correction2.sqrt() as f32,
+            eps: self.eps,
+        }
+    }
+
+    /// Moves the moments of parameter `k` out (for a host-side update), leaving them empty
+    /// until [`Self::put_moments`] gives them back.
+    pub(crate) fn take_moments(&mut self, k: usize) -> (Vec<f32>, Vec<f32>) {
+        (
+            std::mem::take(&mut self.m[k]),
+            std::mem::take(&mut self.v[k]),
+        )
+    }
+
+    /// Gives back the moments of parameter `k` taken with [`Self::take_moments`].
+    pub(crate) fn put_moments(&mut self, k: usize, m: Vec<f32>, v: Vec<f32>) {
+        self.m[k] = m;
+        self.v[k] = v;
+    }
+}
+
+/// The factor that brings a group's gradient norm down to `max_norm` (1 when it is below).
+pub(crate) fn clip_scale(norm: f32, max_norm: f32) -> f32 {
+    if norm > max_norm {
+        max_norm / (norm + 1e-6)
+    } else {
+        1.0
+    }
+}
+
+/// One Adam step's bias-corrected coefficients.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct AdamStep {
+    step_size: f32,
+    sqrt_correction2: f32,
+    eps: f32,
+}
+
+impl AdamStep {
+    /// Updates the moments `m`, `v` with `grad` times `g_scale` and moves `values` by the
+    /// step, in one pass.
+    pub(crate) fn apply(
+        &self,
+        values: &mut [f32],
+        grad: &[f32],
+        g_scale: f32,
+        m: &mut [f32],
+        v: &mut [f32],
+    ) {
+        let (b1, b2) = (BETA1 as f32, BETA2 as f32);
+        for (((x, &g), m), v) in values.iter_mut().zip(grad).zip(m).zip(v) {
+            let g = g * g_scale;
+            *m = b1 * *m + (1.0 - b1) * g;
+            *v = b2 * *v + (1.0 - b2) * g * g;
+            let denom = v.sqrt() / self.sqrt_correction2 + self.eps;
+            *x -= self.step_size * *m / denom;
+        }
     }
 }
 

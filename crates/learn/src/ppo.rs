@@ -15,6 +15,7 @@ use std::time::Instant;
 use candle_core::Tensor;
 
 use crate::error::{Error, Result};
+use crate::fused::{self, Coefs, Columns, Engine};
 use crate::gae::{StepRecord, gae, normalize};
 use crate::network::{ActorCritic, Layout};
 use crate::noise::Noise;
@@ -62,6 +63,18 @@ pub struct Ppo {
     optimizer: Adam,
     scaler: RewardScaler,
     noise: Noise,
+    engine: UpdateEngine,
+}
+
+/// How an update computes its gradients.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum UpdateEngine {
+    /// Hand-written passes over host buffers, the two networks on two cores (`fused`).
+    #[default]
+    Fused,
+    /// candle's autograd, one tensor op at a time: the reference the fused path is tested
+    /// against.
+    Candle,
 }
 
 const HALF_LOG_TWO_PI: f32 = 0.918_938_5;
@@ -78,7 +91,17 @@ impl Ppo {
             config,
             optimizer,
             noise: Noise::new(seed ^ 0xA5A5_5A5A),
+            engine: UpdateEngine::default(),
         })
+    }
+
+    /// Chooses how updates compute their gradients (the same result within float rounding).
+    pub fn set_engine(&mut self, engine: UpdateEngine) {
+        self.engine = engine;
+    }
+
+    pub fn engine(&self) -> UpdateEngine {
+        self.engine
     }
 
     pub(crate) fn optimizer_mut(&mut self) -> &mut Adam {
@@ -160,12 +183,21 @@ impl Ppo {
         let n = rollout.len();
         let width = self.net.layout().actions;
         let device = self.net.device().clone();
-        let inputs = self.net.input(&rollout.states, &rollout.stages)?;
-        let values: Vec<f32> = self.net.value(&inputs)?.to_vec1()?;
-        let next_values: Vec<f32> = self
+        let inputs = self.net.input_rows(&rollout.states, &rollout.stages)?;
+        let next_inputs = self
             .net
-            .value(&self.net.input(&rollout.next_states, &rollout.next_stages)?)?
-            .to_vec1()?;
+            .input_rows(&rollout.next_states, &rollout.next_stages)?;
+        let [values, next_values] = match self.engine {
+            UpdateEngine::Fused => fused::values(&self.net, [&inputs, &next_inputs])?,
+            UpdateEngine::Candle => {
+                let value = |rows: Vec<f32>| -> Result<Vec<f32>> {
+                    let rows =
+                        Tensor::from_vec(rows, (n, self.net.layout().input_width()), &device)?;
+                    Ok(self.net.value(&rows)?.to_vec1()?)
+                };
+                [value(inputs.clone())?, value(next_inputs)?]
+            }
+        };
         let scale = self.reward_scale(rollout);
         let records: Vec<StepRecord> = (0..n)
             .map(|t| StepRecord {
@@ -187,18 +219,6 @@ impl Ppo {
         if n > 1 {
             normalize(&mut advantages)?;
         }
-        let rows = |v: &[Vec<f32>]| -> Result<Tensor> {
-            Ok(Tensor::from_vec(v.concat(), (n, width), &device)?)
-        };
-        let columns = [
-            inputs,
-            rows(&rollout.actions)?,
-            rows(&rollout.masks)?,
-            Tensor::from_vec(rollout.log_probs.clone(), n, &device)?,
-            Tensor::from_vec(advantages, n, &device)?,
-            Tensor::from_vec(returns, n, &device)?,
-        ];
-
         let learning_rate = self.config.learning_rate_at(progress);
         self.optimizer.learning_rate = learning_rate;
         let mut stats = UpdateStats {
@@ -206,7 +226,104 @@ impl Ppo {
             reward_scale: scale,
             ..UpdateStats::default()
         };
-        stats.timing.prepare = started.elapsed().as_secs_f64();
+        match self.engine {
+            UpdateEngine::Fused => {
+                let columns = Columns {
+                    inputs,
+                    actions: rollout.actions.concat(),
+                    masks: rollout.masks.concat(),
+                    old_log_probs: rollout.log_probs.clone(),
+                    advantages,
+                    returns,
+                    width: self.net.layout().input_width(),
+                    action_width: width,
+                };
+                stats.timing.prepare = started.elapsed().as_secs_f64();
+                self.epochs_fused(&columns, &mut stats)?;
+            }
+            UpdateEngine::Candle => {
+                let rows = |v: &[Vec<f32>]| -> Result<Tensor> {
+                    Ok(Tensor::from_vec(v.concat(), (n, width), &device)?)
+                };
+                let columns = [
+                    Tensor::from_vec(inputs, (n, self.net.layout().input_width()), &device)?,
+                    rows(&rollout.actions)?,
+                    rows(&rollout.masks)?,
+                    Tensor::from_vec(rollout.log_probs.clone(), n, &device)?,
+                    Tensor::from_vec(advantages, n, &device)?,
+                    Tensor::from_vec(returns, n, &device)?,
+                ];
+                stats.timing.prepare = started.elapsed().as_secs_f64();
+                self.epochs_candle(&columns, n, &mut stats)?;
+            }
+        }
+        let scale = 1.0 / stats.minibatches.max(1) as f32;
+        stats.policy_loss *= scale;
+        stats.value_loss *= scale;
+        stats.entropy *= scale;
+        stats.approx_kl *= scale;
+        stats.clipfrac *= scale;
+        let norm_start = Instant::now();
+        if self.config.norm_obs {
+            self.net.update_norm(&rollout.states, &rollout.stages);
+        }
+        stats.timing.bookkeeping += norm_start.elapsed().as_secs_f64();
+        Ok(stats)
+    }
+
+    /// The minibatch epochs with the fused engine: the networks on the host for the whole
+    /// update, written back once at its end.
+    fn epochs_fused(&mut self, columns: &Columns, stats: &mut UpdateStats) -> Result<()> {
+        let n = columns.len();
+        let coefs = Coefs {
+            clip: self.config.clip_coef as f32,
+            ent: self.config.ent_coef as f32,
+            vf: self.config.vf_coef as f32,
+            max_grad_norm: self.config.max_grad_norm as f32,
+        };
+        let mut engine = Engine::load(&self.net, &mut self.optimizer)?;
+        let mut shuffled = Columns::default();
+        let minibatch = self.config.minibatch_size.min(n).max(1);
+        'epochs: for _ in 0..self.config.update_epochs {
+            let order = self.noise.shuffle(n);
+            let shuffle_start = Instant::now();
+            columns.gather(&order, &mut shuffled);
+            stats.timing.shuffle += shuffle_start.elapsed().as_secs_f64();
+            for start in (0..n).step_by(minibatch) {
+                let started = Instant::now();
+                let len = minibatch.min(n - start);
+                let step = self.optimizer.next_step();
+                let mb = engine.minibatch(shuffled.slice(start, len), coefs, step);
+                let secs = started.elapsed().as_secs_f64();
+                stats.timing.optimizer += mb.optimizer_secs;
+                stats.timing.forward_backward += secs - mb.optimizer_secs;
+                stats.policy_loss += mb.policy_loss;
+                stats.value_loss += mb.value_loss;
+                stats.entropy += mb.entropy;
+                stats.approx_kl += mb.approx_kl;
+                stats.clipfrac += mb.clipfrac;
+                stats.minibatches += 1;
+                let target_kl = self.config.target_kl as f32;
+                if target_kl > 0.0 && mb.approx_kl > 1.5 * target_kl {
+                    break 'epochs;
+                }
+            }
+        }
+        let write_back = Instant::now();
+        engine.store(&self.net, &mut self.optimizer)?;
+        stats.timing.optimizer += write_back.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// The minibatch epochs with candle's autograd (the reference path) over the columns
+    /// `[inputs, actions, masks, old log-probs, advantages, returns]`.
+    fn epochs_candle(
+        &mut self,
+        columns: &[Tensor],
+        n: usize,
+        stats: &mut UpdateStats,
+    ) -> Result<()> {
+        let device = self.net.device().clone();
         let minibatch = self.config.minibatch_size.min(n).max(1);
         'epochs: for _ in 0..self.config.update_epochs {
             let order: Vec<u32> = self
@@ -228,49 +345,27 @@ impl Ppo {
                     .iter()
                     .map(|c| c.narrow(0, start, len))
                     .collect::<candle_core::Result<Vec<_>>>()?;
-                let kl = self.minibatch(&batch, &mut stats)?;
+                let kl = self.minibatch(&batch, stats)?;
                 let target_kl = self.config.target_kl as f32;
                 if target_kl > 0.0 && kl > 1.5 * target_kl {
                     break 'epochs;
                 }
             }
         }
-        let scale = 1.0 / stats.minibatches.max(1) as f32;
-        stats.policy_loss *= scale;
-        stats.value_loss *= scale;
-        stats.entropy *= scale;
-        stats.approx_kl *= scale;
-        stats.clipfrac *= scale;
-        let norm_start = Instant::now();
-        if self.config.norm_obs {
-            self.net.update_norm(&rollout.states, &rollout.stages);
-        }
-        stats.timing.bookkeeping += norm_start.elapsed().as_secs_f64();
-        Ok(stats)
+        Ok(())
     }
 
     /// One gradient step on a minibatch `[inputs, actions, masks, old log-probs, advantages,
     /// returns]`; adds its losses to `stats` and returns its approximate KL.
     fn minibatch(&mut self, batch: &[Tensor], stats: &mut UpdateStats) -> Result<f32> {
         let started = Instant::now();
-        let [input, actions, masks, old_log_probs, advantages, returns] = batch else {
-            return Err(Error::Length {
-                what: "minibatch columns",
-                expected: 6,
-                got: batch.len(),
-            });
-        };
-        let log_probs = self.net.log_prob(&self.net.mean(input)?, actions, masks)?;
-        let log_ratio = (&log_probs - old_log_probs)?;
-        let ratio = log_ratio.exp()?;
-        let eps = f64::from(self.config.clip_coef as f32);
-        let unclipped = (&ratio * advantages)?;
-        let clipped = (ratio.clamp(1.0 - eps, 1.0 + eps)? * advantages)?;
-        let policy_loss = unclipped.minimum(&clipped)?.mean_all()?.neg()?;
-        let value_loss = (self.net.value(input)? - returns)?.sqr()?.mean_all()?;
-        let entropy = self.net.entropy(masks)?.mean_all()?;
-        let loss = ((&policy_loss + (&value_loss * self.config.vf_coef)?)?
-            - (&entropy * self.config.ent_coef)?)?;
+        let CandleLoss {
+            loss,
+            policy_loss,
+            value_loss,
+            entropy,
+            log_ratio,
+        } = candle_loss(&self.net, &self.config, batch)?;
         let grads = loss.backward()?;
         let stepped = Instant::now();
         stats.timing.forward_backward += (stepped - started).as_secs_f64();
@@ -298,6 +393,49 @@ impl Ppo {
         stats.timing.bookkeeping += read.elapsed().as_secs_f64();
         Ok(approx_kl)
     }
+}
+
+/// A minibatch's PPO loss as candle tensors (the reference path), with its parts.
+pub(crate) struct CandleLoss {
+    pub loss: Tensor,
+    pub policy_loss: Tensor,
+    pub value_loss: Tensor,
+    pub entropy: Tensor,
+    pub log_ratio: Tensor,
+}
+
+/// The PPO loss of `net` on a minibatch `[inputs, actions, masks, old log-probs, advantages,
+/// returns]`: the clipped surrogate, `vf_coef` times the squared value error, minus
+/// `ent_coef` times the entropy.
+pub(crate) fn candle_loss(
+    net: &ActorCritic,
+    config: &PpoConfig,
+    batch: &[Tensor],
+) -> Result<CandleLoss> {
+    let [input, actions, masks, old_log_probs, advantages, returns] = batch else {
+        return Err(Error::Length {
+            what: "minibatch columns",
+            expected: 6,
+            got: batch.len(),
+        });
+    };
+    let log_probs = net.log_prob(&net.mean(input)?, actions, masks)?;
+    let log_ratio = (&log_probs - old_log_probs)?;
+    let ratio = log_ratio.exp()?;
+    let eps = f64::from(config.clip_coef as f32);
+    let unclipped = (&ratio * advantages)?;
+    let clipped = (ratio.clamp(1.0 - eps, 1.0 + eps)? * advantages)?;
+    let policy_loss = unclipped.minimum(&clipped)?.mean_all()?.neg()?;
+    let value_loss = (net.value(input)? - returns)?.sqr()?.mean_all()?;
+    let entropy = net.entropy(masks)?.mean_all()?;
+    let loss = ((&policy_loss + (&value_loss * config.vf_coef)?)? - (&entropy * config.ent_coef)?)?;
+    Ok(CandleLoss {
+        loss,
+        policy_loss,
+        value_loss,
+        entropy,
+        log_ratio,
+    })
 }
 
 /// The policy of `net` at a batch of abstract states: Gaussian actions around its means (the

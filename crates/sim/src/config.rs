@@ -130,7 +130,20 @@ pub struct SimConfig {
     /// 5 rad/s, measured between the two (docs/WORLDS.md, "The handle bottle of `t07`").
     /// Hands without a relaxed pose start preshaped and are unaffected.
     pub preshape_speed: f32,
+    /// Training's shortcut through the hold (0, the default, is off: the paper's full hold).
+    /// With `settle_s > 0`, a hold-objective grasp whose object has rested in the palm's
+    /// frame (within [`SETTLE_DISTANCE`] and [`SETTLE_ANGLE`]) for `settle_s` seconds of the
+    /// judge's steady hold passes at once, instead of after `hold_s`. Only training sets it;
+    /// evaluations run the full hold. Agreement with the full hold is measured by `crm bench
+    /// hold` (docs/BENCHMARKS.md).
+    pub settle_s: f32,
 }
+
+/// How far (m) the object may move in the palm's frame and still count as resting
+/// ([`SimConfig::settle_s`]): 1 mm.
+pub const SETTLE_DISTANCE: f32 = 1e-3;
+/// How far (rad) it may turn there: 0.01 rad.
+pub const SETTLE_ANGLE: f32 = 0.01;
 
 impl Default for SimConfig {
     fn default() -> Self {
@@ -158,6 +171,7 @@ impl Default for SimConfig {
             ready_finger_force: 0.3,
             stiction: StictionConfig::default(),
             preshape_speed: 5.0,
+            settle_s: 0.0,
         }
     }
 }

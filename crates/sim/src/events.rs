@@ -2,7 +2,7 @@
 //! sections IV-A and V-B-2).
 
 use crate::benchmark::{Objective, Task};
-use crate::config::SimConfig;
+use crate::config::{SETTLE_ANGLE, SETTLE_DISTANCE, SimConfig};
 
 /// What the judge looks at after a control step.
 #[derive(Clone, Debug, Default)]
@@ -24,6 +24,8 @@ pub struct Snapshot {
     pub twist_torque: f32,
     /// Hand force on the object along the press direction, straight down (N).
     pub press_force: f32,
+    /// The object's position (m) and orientation (quaternion `x, y, z, w`) in the palm's frame.
+    pub in_palm: ([f32; 3], [f32; 4]),
 }
 
 /// Tracks timers across control steps and decides which events hold.
@@ -35,6 +37,8 @@ pub struct Judge {
     anchored: bool,
     control_dt: f32,
     hold_s: f32,
+    /// [`SimConfig::settle_s`]: 0 is off.
+    settle_s: f32,
     sustain_s: f32,
     lift_height: f32,
     drop_height: f32,
@@ -48,6 +52,9 @@ pub struct Judge {
     graded: bool,
     grasp_steps: usize,
     held_steps: usize,
+    /// Steady steps with the object at rest in the palm since `settle_from`.
+    settled_steps: usize,
+    settle_from: Option<([f32; 3], [f32; 4])>,
     sustained_steps: usize,
     over_limit_steps: usize,
     lifted_once: bool,
@@ -113,6 +120,20 @@ pub fn outcome_label(end: &str, fail: Option<FailCause>, reach: Option<ReachCaus
     }
 }
 
+/// Whether two poses in the palm's frame are within [`SETTLE_DISTANCE`] and [`SETTLE_ANGLE`]
+/// of each other.
+fn at_rest(a: ([f32; 3], [f32; 4]), b: ([f32; 3], [f32; 4])) -> bool {
+    let distance =
+        a.0.iter()
+            .zip(&b.0)
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f32>()
+            .sqrt();
+    let dot = a.1.iter().zip(&b.1).map(|(x, y)| x * y).sum::<f32>().abs();
+    let angle = 2.0 * dot.min(1.0).acos();
+    distance <= SETTLE_DISTANCE && angle <= SETTLE_ANGLE
+}
+
 impl Judge {
     pub fn new(task: &Task, force_limit: f32, anchored: bool, config: &SimConfig) -> Self {
         Self {
@@ -122,6 +143,7 @@ impl Judge {
             anchored,
             control_dt: config.control_dt(),
             hold_s: config.hold_s,
+            settle_s: config.settle_s,
             sustain_s: config.sustain_s,
             lift_height: config.lift_height,
             drop_height: config.drop_height,
@@ -134,6 +156,8 @@ impl Judge {
             graded: true,
             grasp_steps: 0,
             held_steps: 0,
+            settled_steps: 0,
+            settle_from: None,
             sustained_steps: 0,
             over_limit_steps: 0,
             lifted_once: false,
@@ -170,6 +194,25 @@ impl Judge {
 
     fn seconds(&self, steps: usize) -> f32 {
         steps as f32 * self.control_dt
+    }
+
+    /// Counts the steady steps in which the object has stayed where it was in the palm's
+    /// frame when the count began (within [`SETTLE_DISTANCE`] and [`SETTLE_ANGLE`]); a step
+    /// that moved it, or one that is not steady, starts the count again. Returns the count.
+    fn settle(&mut self, steady: bool, in_palm: ([f32; 3], [f32; 4])) -> usize {
+        if !steady || self.settle_s <= 0.0 {
+            self.settle_from = None;
+            self.settled_steps = 0;
+            return 0;
+        }
+        match self.settle_from {
+            Some(from) if at_rest(from, in_palm) => self.settled_steps += 1,
+            _ => {
+                self.settle_from = Some(in_palm);
+                self.settled_steps = 0;
+            }
+        }
+        self.settled_steps
     }
 
     /// The events that hold after this control step and, for `fail`, why.
@@ -216,7 +259,9 @@ impl Judge {
             let lift_part = (s.displacement[2] / self.lift_height).clamp(0.0, 1.0);
             let hold_part = (self.seconds(self.held_steps) / self.hold_s).clamp(0.0, 1.0);
             self.progress = 0.5 * lift_part + 0.5 * hold_part;
+            let settled = self.settle(steady, s.in_palm);
             self.seconds(self.held_steps) >= self.hold_s - 1e-6
+                || (self.settle_s > 0.0 && self.seconds(settled) >= self.settle_s - 1e-6)
         } else {
             let measure = match self.objective {
                 Objective::Twist => s.twist_torque * self.required.signum(),
@@ -407,6 +452,44 @@ mod tests {
             assert!(!events.contains(&"succ"));
         }
         assert!(judge.judge(&held()).0.contains(&"succ"));
+    }
+
+    #[test]
+    fn with_settle_s_an_object_at_rest_in_the_palm_passes_early_and_a_creeping_one_does_not() {
+        let config = SimConfig {
+            settle_s: 0.5,
+            ..SimConfig::deterministic()
+        };
+        let judge = || {
+            let mut judge = Judge::new(&task(Objective::Lift, None), 20.0, false, &config);
+            judge.set_stage("grasp");
+            judge
+        };
+        let at = |x: f32| Snapshot {
+            in_palm: ([x, 0.02, 0.05], [0.0, 0.0, 0.0, 1.0]),
+            ..held()
+        };
+        let settle = (config.settle_s / config.control_dt()).round() as usize;
+        let hold = (config.hold_s / config.control_dt()).round() as usize;
+        // At rest: the first steady step sets the reference, `settle` more pass.
+        let mut resting = judge();
+        for step in 0..settle {
+            assert!(!resting.judge(&at(0.0)).0.contains(&"succ"), "step {step}");
+        }
+        assert!(resting.judge(&at(0.0)).0.contains(&"succ"));
+        // Creeping 0.2 mm a step, 1 mm in five: the count starts again, the full hold decides.
+        let mut creeping = judge();
+        for step in 0..hold - 1 {
+            let x = 2e-4 * step as f32;
+            assert!(!creeping.judge(&at(x)).0.contains(&"succ"), "step {step}");
+        }
+        assert!(creeping.judge(&at(2e-4 * hold as f32)).0.contains(&"succ"));
+        // Off (the default): only the full hold passes.
+        let (mut full, _) = grasping_judge(Objective::Lift, None);
+        for _ in 0..hold - 1 {
+            assert!(!full.judge(&at(0.0)).0.contains(&"succ"));
+        }
+        assert!(full.judge(&at(0.0)).0.contains(&"succ"));
     }
 
     #[test]

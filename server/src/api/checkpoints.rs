@@ -90,6 +90,37 @@ pub async fn download(State(state): State<Arc<AppState>>, Path(id): Path<String>
         .into_response())
 }
 
+/// `GET /api/v1/checkpoints/{id}/lineage`: how the checkpoint was made, from its file's
+/// header (only the header is read).
+pub async fn lineage(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let row = state
+        .store
+        .checkpoint(parse_id(&id)?)
+        .await
+        .map_err(|e| ApiError::store("checkpoint", e))?;
+    let path = state.store.checkpoint_path(&row);
+    let info = tokio::task::spawn_blocking(move || read_info(&path))
+        .await
+        .map_err(ApiError::internal)?
+        .map_err(ApiError::internal)?;
+    Ok(Json(json!({ "checkpoint_id": row.id, "lineage": info.lineage })).into_response())
+}
+
+/// The header of a stored checkpoint file: its first bytes only.
+fn read_info(path: &std::path::Path) -> anyhow::Result<crm_api::checkpoint::CheckpointInfo> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let len = file.metadata()?.len();
+    let mut prefix = [0u8; 8];
+    file.read_exact(&mut prefix)?;
+    let end = crm_api::checkpoint::header_len(&prefix)
+        .ok_or_else(|| anyhow::anyhow!("{}: no valid header length", path.display()))?;
+    let mut bytes = prefix.to_vec();
+    bytes.resize(usize::try_from(end)?, 0);
+    file.read_exact(&mut bytes[8..])?;
+    Ok(crm_api::checkpoint::inspect(&bytes, len)?)
+}
+
 /// A label as a file name: letters, digits, `-`, `_` and `.`; anything else becomes `_`.
 fn file_safe(name: &str) -> String {
     name.chars()

@@ -101,6 +101,8 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
             check_imitation(catalog, &spec)?;
             crm_api::jobs::check_hold_s(spec.hold_s)
                 .map_err(|message| ApiError::invalid("hold_s", message))?;
+            crm_api::jobs::check_settle_s(spec.settle_s)
+                .map_err(|message| ApiError::invalid("settle_s", message))?;
             crm_api::jobs::check_start_log_std(spec.algorithm, spec.start_log_std)
                 .map_err(|message| ApiError::invalid("start_log_std", message))?;
             spec.config

@@ -59,6 +59,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         )
         .route("/checkpoints/{id}", get(checkpoints::get))
         .route("/checkpoints/{id}/download", get(checkpoints::download))
+        .route("/checkpoints/{id}/lineage", get(checkpoints::lineage))
         .route("/workers", get(resources::workers))
         .route("/tasks", get(resources::tasks))
         .route("/worlds", get(resources::worlds))

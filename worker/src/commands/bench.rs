@@ -17,6 +17,8 @@ pub enum BenchCommand {
     Env(EnvBenchArgs),
     /// PPO rollout steps per second (policy in the loop) and update samples per second.
     Learn(LearnBenchArgs),
+    /// Training's hold shortcut (`settle_s`) against the full hold on the same episodes.
+    Hold(super::bench_hold::HoldBenchArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -49,6 +51,30 @@ pub struct LearnBenchArgs {
     /// each on one thread: see `crm_learn::kernels`), to compare the two.
     #[arg(long)]
     pub split_products: bool,
+    /// How the PPO update computes gradients: `fused` (what training runs) or `candle`
+    /// (autograd, the reference the fused path is tested against).
+    #[arg(long, value_enum, default_value_t = Engine::Fused)]
+    pub engine: Engine,
+    /// Training's hold shortcut (`crm train --settle-s`), as a training run with it steps.
+    #[arg(long, value_name = "SECONDS")]
+    pub settle_s: Option<f64>,
+}
+
+/// `crm_learn::UpdateEngine` on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Engine {
+    Fused,
+    Candle,
+}
+
+impl From<Engine> for crm_learn::UpdateEngine {
+    fn from(engine: Engine) -> Self {
+        match engine {
+            Engine::Fused => Self::Fused,
+            Engine::Candle => Self::Candle,
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -74,6 +100,10 @@ struct LearnReport {
     sac_batch_size: usize,
     /// Whether matrix products were split over threads (`--split-products`).
     split_products: bool,
+    /// The PPO update's engine (`--engine`).
+    engine: Engine,
+    /// Training's hold shortcut (`--settle-s`), if on.
+    settle_s: Option<f64>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -109,6 +139,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
     match command {
         BenchCommand::Env(args) => env(args),
         BenchCommand::Learn(args) => learn(args),
+        BenchCommand::Hold(args) => super::bench_hold::hold(args),
     }
 }
 
@@ -216,18 +247,25 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
         config.rollout_steps = steps;
     }
     config.validate()?;
+    crm_api::jobs::check_settle_s(args.settle_s)
+        .map_err(|message| anyhow::anyhow!("--settle-s {message}"))?;
+    let sim = SimConfig {
+        settle_s: args.settle_s.unwrap_or(0.0) as f32,
+        ..args.env.config()
+    };
     let env_count = args.envs.unwrap_or_else(rayon::current_num_threads).max(1);
     let envs = (0..env_count)
         .map(|_| {
             crm::CrmEnv::new(
                 machine.clone(),
-                GraspEnv::new(benchmark.clone(), args.env.config()),
+                GraspEnv::new(benchmark.clone(), sim.clone()),
                 crm::RewardMode::Crm,
             )
         })
         .collect();
     let mut envs = crm_learn::VecEnv::new(envs, 1)?;
     let mut ppo = crm_learn::Ppo::new(crm_learn::Layout::of(&machine), config.clone(), 1)?;
+    ppo.set_engine(args.engine.into());
     if let Some(path) = &args.checkpoint {
         let (net, _) =
             crm_learn::Checkpoint::load(path, &machine.spec().hash(), grasp_sim::ENV_VERSION)?;
@@ -296,6 +334,8 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
         sac_gradient_steps_per_sec: sac_steps as f64 / sac_secs,
         sac_batch_size: sac_config.batch_size,
         split_products: crm_learn::kernels::products_split(),
+        engine: args.engine,
+        settle_s: args.settle_s,
     };
     if args.json {
         emit(&format!("{}\n", serde_json::to_string(&report)?))

@@ -1,6 +1,8 @@
 //! One module per subcommand.
 
 pub mod bench;
+mod bench_hold;
+pub mod checkpoint;
 pub mod eval;
 pub mod oracle;
 pub mod record;

@@ -57,6 +57,10 @@ pub struct TrainArgs {
     /// Also write a checkpoint every this many iterations (0: only at the end).
     #[arg(long, default_value_t = 0)]
     pub checkpoint_every: u64,
+    /// Keep each periodic checkpoint as `ALGO-STEPS.safetensors` beside the latest (to find
+    /// afterwards when a run first met a bar).
+    #[arg(long)]
+    pub keep_checkpoints: bool,
     /// Before PPO, clone the scripted oracle's successful episodes out of this many (0: off).
     #[arg(long, default_value_t = 0)]
     pub bc_episodes: u64,
@@ -88,6 +92,19 @@ pub struct TrainArgs {
     /// in the paper.
     #[arg(long)]
     pub curriculum: bool,
+    /// Training's shortcut through the hold (a job's `settle_s`): a hold grasp whose object
+    /// has rested in the palm for this many seconds passes then; off without it.
+    #[arg(long, value_name = "SECONDS", value_parser = parse_settle_s)]
+    pub settle_s: Option<f64>,
+}
+
+/// `--settle-s`: seconds within [`crm_api::jobs::SETTLE_S_RANGE`].
+fn parse_settle_s(text: &str) -> Result<f64, String> {
+    let settle: f64 = text
+        .parse()
+        .map_err(|_| format!("{text:?} is not a number of seconds"))?;
+    crm_api::jobs::check_settle_s(Some(settle))?;
+    Ok(settle)
 }
 
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
@@ -156,6 +173,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         objective: args.env.protocol,
         curriculum: args.curriculum,
         hold_s: args.env.hold_s,
+        settle_s: args.settle_s,
     };
     let init = match (&args.resume, &args.fine_tune) {
         (Some(path), _) => Some(crate::jobs::Init::Resume(path)),
@@ -163,6 +181,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         (None, None) => None,
     };
     let mut trainer = Trainer::new(spec.clone(), &args.env, init, None)?;
+    trainer.set_command(std::env::args().collect());
     let bar = indicatif::ProgressBar::new(0);
     demos::imitate(
         &spec,
@@ -226,6 +245,13 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         bar.set_message(message);
         if args.checkpoint_every > 0 && it.iteration % args.checkpoint_every == 0 {
             trainer.save(&checkpoint)?;
+            if args.keep_checkpoints {
+                let kept = args
+                    .out
+                    .join(format!("{}-{}.safetensors", args.algo.name(), it.steps));
+                std::fs::copy(&checkpoint, &kept)
+                    .with_context(|| format!("keeping {}", kept.display()))?;
+            }
         }
     }
     if trainer.stopped_early() {

@@ -119,6 +119,10 @@ impl LoadedPolicy {
 pub struct EpisodeRecord {
     pub task: String,
     pub success: bool,
+    /// How it ended (`success`, `failure (dropped)`, ...: [`grasp_sim::events::outcome_label`]).
+    pub outcome: String,
+    /// Simulated seconds, the arm's execution included.
+    pub sim_seconds: f64,
     pub length: usize,
     pub total_return: f64,
     /// (step, from stage, to stage, event, transition reward).
@@ -166,6 +170,20 @@ pub fn evaluate(
     spec: &EvalSpec,
     env: &EnvArgs,
     recorder: Option<crate::record::SharedRecorder>,
+    progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
+) -> anyhow::Result<EvalReport> {
+    let config = env.config_for(spec.objective, spec.hold_s);
+    evaluate_in(path, spec, env, config, recorder, progress)
+}
+
+/// [`evaluate`] in the world's settings `config` (benchmarks compare settings on the same
+/// episodes; evaluations take the job's).
+pub fn evaluate_in(
+    path: &Path,
+    spec: &EvalSpec,
+    env: &EnvArgs,
+    config: grasp_sim::SimConfig,
+    recorder: Option<crate::record::SharedRecorder>,
     mut progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
 ) -> anyhow::Result<EvalReport> {
     if spec.episodes == 0 {
@@ -175,10 +193,7 @@ pub fn evaluate(
     let mut policy = LoadedPolicy::load(path, env)?;
     let (algorithm, trained_steps) = (policy.algorithm.clone(), policy.trained_steps);
     let machine = policy.machine.clone();
-    let mut grasp = GraspEnv::new(
-        benchmark.clone(),
-        env.config_for(spec.objective, spec.hold_s),
-    );
+    let mut grasp = GraspEnv::new(benchmark.clone(), config);
     super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?.apply(&mut grasp)?;
     let recorded = crate::record::Recorded::new(grasp, machine.clone(), recorder);
     let mut crm_env = crm::CrmEnv::new(machine, recorded, crm::RewardMode::Crm);
@@ -224,6 +239,8 @@ pub fn evaluate(
         let record = EpisodeRecord {
             task: crm_env.env().inner().task().id.clone(),
             success,
+            outcome: outcome.clone(),
+            sim_seconds: seconds,
             length,
             total_return: episode.total_return(),
             transitions: episode

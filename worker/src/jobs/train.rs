@@ -14,12 +14,22 @@ use crm_api::{Algorithm, Iteration, TrainSpec};
 use crm_learn::checkpoint::FORMAT;
 use crm_learn::rollout::Episode;
 use crm_learn::{
-    Checkpoint, CheckpointHeader, EarlyStop, Layout, Ppo, Sac, TaskCurriculum, VecEnv,
+    Checkpoint, CheckpointHeader, EarlyStop, Layout, LineageStage, Ppo, Sac, TaskCurriculum, VecEnv,
 };
 use grasp_sim::GraspEnv;
 
 use crate::commands::EnvArgs;
 use crate::record::{Recorded, SharedRecorder, lock};
+
+/// The sha256 of a file's bytes, hex.
+fn file_sha256(path: &Path) -> anyhow::Result<String> {
+    use sha2::{Digest, Sha256};
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(Sha256::digest(&bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
 
 /// The learner of a run.
 enum Learner {
@@ -72,6 +82,12 @@ pub struct Trainer {
     tasks: TaskCurriculum,
     task_ids: Vec<String>,
     curriculum: bool,
+    /// The stages before this run (its parent's lineage) and what this run adds.
+    lineage: Vec<LineageStage>,
+    stage_kind: &'static str,
+    parent_sha256: Option<String>,
+    command: Option<Vec<String>>,
+    imitation: Option<serde_json::Value>,
 }
 
 impl Trainer {
@@ -90,6 +106,8 @@ impl Trainer {
         spec.sac.validate()?;
         crm_api::jobs::check_start_log_std(spec.algorithm, spec.start_log_std)
             .map_err(|message| anyhow::anyhow!("start_log_std {message}"))?;
+        crm_api::jobs::check_settle_s(spec.settle_s)
+            .map_err(|message| anyhow::anyhow!("settle_s {message}"))?;
         let benchmark = env.benchmark()?;
         let machine = match spec.algorithm {
             Algorithm::Ppo => env.machine_or(grasp_sim::spec::flat_spec())?,
@@ -107,9 +125,12 @@ impl Trainer {
         let mut start_steps = 0;
         let mut resume_ppo = None;
         let mut resume_sac = None;
+        let (mut lineage, mut parent_sha256) = (Vec::new(), None);
         if let Some(init) = init {
             let path = init.path();
             let header = Checkpoint::read_header(path)?;
+            lineage = LineageStage::inherited(&header);
+            parent_sha256 = Some(file_sha256(path)?);
             if header.algorithm != spec.algorithm.name() {
                 bail!(
                     "checkpoint {} was trained with {}, not {}",
@@ -172,10 +193,9 @@ impl Trainer {
         };
         let envs = (0..env_count)
             .map(|k| {
-                let mut grasp = GraspEnv::new(
-                    benchmark.clone(),
-                    env.config_for(spec.objective, spec.hold_s),
-                );
+                let mut config = env.config_for(spec.objective, spec.hold_s);
+                config.settle_s = spec.settle_s.unwrap_or(0.0) as f32;
+                let mut grasp = GraspEnv::new(benchmark.clone(), config);
                 choice.apply(&mut grasp)?;
                 let recorder = if k == 0 { recorder.clone() } else { None };
                 Ok(crm::CrmEnv::new(
@@ -205,6 +225,15 @@ impl Trainer {
             world: (env.world()?.name.clone(), env.world()?.hash.clone()),
             stage_names,
             started: Instant::now(),
+            lineage,
+            stage_kind: match init {
+                None => "train",
+                Some(Init::Resume(_)) => "resume",
+                Some(Init::FineTune(_)) => "fine-tune",
+            },
+            parent_sha256,
+            command: None,
+            imitation: None,
             start_steps,
             done: start_steps,
             iteration: 0,
@@ -221,10 +250,42 @@ impl Trainer {
         learning_rate: f64,
         on_epoch: impl FnMut(usize, f32) -> bool,
     ) -> anyhow::Result<f32> {
-        match &mut self.learner {
-            Learner::Ppo(ppo) => Ok(ppo.imitate_with(demos, epochs, learning_rate, on_epoch)?),
+        let loss = match &mut self.learner {
+            Learner::Ppo(ppo) => ppo.imitate_with(demos, epochs, learning_rate, on_epoch)?,
             Learner::Sac(_) => bail!("behaviour cloning is for the PPO learners"),
-        }
+        };
+        self.imitation = Some(serde_json::json!({
+            "demo_steps": demos.len(),
+            "epochs": epochs,
+            "learning_rate": learning_rate,
+            "final_loss": loss,
+            "settings": self.spec.imitation,
+        }));
+        Ok(loss)
+    }
+
+    /// The command line that started this run, kept in its checkpoints' lineage.
+    pub fn set_command(&mut self, command: Vec<String>) {
+        self.command = Some(command);
+    }
+
+    /// This checkpoint's lineage: the parent's stages, then this run so far.
+    fn lineage(&self) -> anyhow::Result<Vec<LineageStage>> {
+        let mut lineage = self.lineage.clone();
+        lineage.push(LineageStage {
+            kind: self.stage_kind.to_string(),
+            algorithm: self.spec.algorithm.name().to_string(),
+            steps: self.done - self.start_steps,
+            wall_s: self.started.elapsed().as_secs_f64(),
+            seed: self.spec.seed,
+            parent_sha256: self.parent_sha256.clone(),
+            world: Some(self.world.0.clone()),
+            world_hash: Some(self.world.1.clone()),
+            imitation: self.imitation.clone(),
+            command: self.command.clone(),
+            job: serde_json::to_value(&self.spec)?,
+        });
+        Ok(lineage)
     }
 
     /// The policy's actions at `states` in `stages` (union space): sampled, as it acts in
@@ -387,6 +448,7 @@ impl Trainer {
             activation: None,
             world: Some(self.world.0.clone()),
             world_hash: Some(self.world.1.clone()),
+            lineage: self.lineage()?,
         };
         // Write beside and rename, so a reader never sees half a checkpoint.
         let partial = path.with_extension("safetensors.partial");
@@ -446,6 +508,18 @@ mod tests {
         assert!(all_near(&log_std(&tuned), -1.0));
         let kept = new(None, Some(Init::FineTune(&path))).expect("fine-tune");
         assert!(all_near(&log_std(&kept), -2.0));
+        // The child's header carries its parent's stage and its own, with the parent's hash.
+        let child = dir.join("child.safetensors");
+        tuned.save(&child).expect("save");
+        let lineage = Checkpoint::read_header(&child).expect("header").lineage;
+        let kinds: Vec<&str> = lineage.iter().map(|s| s.kind.as_str()).collect();
+        assert_eq!(kinds, ["train", "fine-tune"]);
+        assert_eq!(lineage[0].parent_sha256, None);
+        assert_eq!(
+            lineage[1].parent_sha256.as_deref(),
+            Some(file_sha256(&path).expect("hash").as_str())
+        );
+        assert_eq!(lineage[1].job["start_log_std"], -1.0);
         // A resume goes on with what the run learned, whatever the spec says.
         let resumed = new(Some(-1.0), Some(Init::Resume(&path))).expect("resume");
         assert!(all_near(&log_std(&resumed), -2.0));

@@ -82,6 +82,8 @@ impl Recorded {
             summary: EpisodeRecord {
                 task: self.inner.task().id.clone(),
                 success: false,
+                outcome: String::new(),
+                sim_seconds: 0.0,
                 length: 0,
                 total_return: 0.0,
                 transitions: Vec::new(),
@@ -146,6 +148,10 @@ impl Recorded {
             let stage = self.machine.stage_name(episode.stage);
             let done = !step.truncated || outcome.as_ref().is_ok_and(|o| o.done);
             episode.summary.success = done && stage == "success";
+            episode.summary.outcome =
+                self.inner
+                    .outcome_label(if done { stage } else { "truncated" });
+            episode.summary.sim_seconds = f64::from(self.inner.sim_seconds());
             logged = logged.and_then(|()| scene::log_end(rec, stage, episode.step, !done));
         }
         if let Err(err) = logged {

@@ -282,6 +282,8 @@ mod tests {
         let summary = |task: &str| EpisodeRecord {
             task: task.into(),
             success: true,
+            outcome: "success".into(),
+            sim_seconds: 5.2,
             length: 12,
             total_return: 3.5,
             transitions: vec![(4, "approach".into(), "grasp".into(), "arrive".into(), 50.0)],

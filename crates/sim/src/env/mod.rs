@@ -492,11 +492,11 @@ impl GraspEnv {
         let grasp_location = pose.transform_point(Vec3::from(task.grasp.offset));
         let grasp_point = scene.hand.grasp_point(&scene.world);
         let relative = grasp_location - grasp_point;
-        let arrive_angle = scene
-            .hand
-            .palm_pose(&scene.world)
+        let palm = scene.hand.palm_pose(&scene.world);
+        let arrive_angle = palm
             .rotation
             .angle_between(pose.rotation * scene.grasp_rotation);
+        let in_palm = palm.inverse() * pose;
         let displacement = pose.translation - scene.object_start.translation;
         let up = pose.rotation * Vec3::Z;
         let limit = object.fragility.grasp_force_limit();
@@ -511,6 +511,7 @@ impl GraspEnv {
             grip: contacts.grip,
             twist_torque,
             press_force: -contacts.force.z,
+            in_palm: (in_palm.translation.to_array(), in_palm.rotation.to_array()),
         };
         let judge = self.judge.as_mut().ok_or(Error::NotReset)?;
         // The paper's protocol grades the arm's execution, not the policy's pushes before it.
