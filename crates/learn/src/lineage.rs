@@ -41,9 +41,8 @@ pub struct LineageStage {
 }
 
 impl LineageStage {
-    /// The lineage a child of `parent` (a file with sha256 `sha256`) starts from: the
-    /// parent's own, or, for a parent written without one, a stage made from what its header
-    /// says.
+    /// The lineage a child of the checkpoint with header `parent` starts from: the parent's
+    /// own, or, for a parent written without one, a stage made from what its header says.
     pub fn inherited(parent: &CheckpointHeader) -> Vec<LineageStage> {
         if !parent.lineage.is_empty() {
             return parent.lineage.clone();

@@ -6,9 +6,10 @@
 //! statistics. The reward mode picks CRM-PPO (`crm`), LPPO (`dense`) or IPPO (`sparse`) on
 //! the same machine.
 //!
-//! Speed: the rollout is encoded into tensors once per update; each epoch permutes them with
-//! one gather per column and the minibatches are contiguous row ranges of that, so a
-//! minibatch costs only its forward and backward kernels.
+//! Speed: the rollout is encoded once per update; each epoch permutes it with one gather per
+//! column and the minibatches are contiguous row ranges of that. Training runs the epochs on
+//! the fused engine (`fused/`: hand-written passes, the two networks on two cores); candle's
+//! autograd (`UpdateEngine::Candle`) is the reference it is tested against.
 
 use std::time::Instant;
 

@@ -6,8 +6,9 @@
 //! The actor (with its log std) and the critic share no parameter and are clipped as separate
 //! groups, so each minibatch runs the two networks' forward, backward, norm and Adam step on
 //! the two cores at once (`rayon::join`); the result does not depend on the thread count.
-//! The candle path (`Ppo::minibatch_candle`) stays as the reference: `tests` checks losses and
-//! every gradient against candle's autograd, and one update's parameters against that path's.
+//! The candle path (`UpdateEngine::Candle`, `ppo::candle_loss`) stays as the reference: `tests`
+//! checks losses and every gradient against candle's autograd, and one update's parameters
+//! against that path's.
 
 mod heads;
 pub(crate) mod matmul;
