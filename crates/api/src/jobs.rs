@@ -169,13 +169,7 @@ pub const SETTLE_S_RANGE: (f64, f64) = (0.1, 5.0);
 
 /// Checks a job's `settle_s`: absent, or seconds within [`SETTLE_S_RANGE`].
 pub fn check_settle_s(settle_s: Option<f64>) -> Result<(), String> {
-    let (low, high) = SETTLE_S_RANGE;
-    match settle_s {
-        Some(s) if !(low..=high).contains(&s) => Err(format!(
-            "must be between {low} and {high} seconds (0.5 s agrees with the full hold)"
-        )),
-        _ => Ok(()),
-    }
+    check_seconds(settle_s, SETTLE_S_RANGE, "0.5 s agrees with the full hold")
 }
 
 /// Shortest and longest steady hold (s) a job may ask: at least a few control steps, and room
@@ -184,11 +178,15 @@ pub const HOLD_S_RANGE: (f64, f64) = (0.1, 8.0);
 
 /// Checks a job's `hold_s`: absent, or seconds within [`HOLD_S_RANGE`].
 pub fn check_hold_s(hold_s: Option<f64>) -> Result<(), String> {
-    let (low, high) = HOLD_S_RANGE;
-    match hold_s {
-        Some(h) if !(low..=high).contains(&h) => Err(format!(
-            "must be between {low} and {high} seconds (the paper's test holds 5 s)"
-        )),
+    check_seconds(hold_s, HOLD_S_RANGE, "the paper's test holds 5 s")
+}
+
+/// Absent, or seconds within `(low, high)`; the refusal names the range and `note`.
+fn check_seconds(value: Option<f64>, (low, high): (f64, f64), note: &str) -> Result<(), String> {
+    match value {
+        Some(s) if !(low..=high).contains(&s) => {
+            Err(format!("must be between {low} and {high} seconds ({note})"))
+        }
         _ => Ok(()),
     }
 }

@@ -375,16 +375,8 @@ impl Ppo {
         let read = Instant::now();
         stats.timing.optimizer += (read - stepped).as_secs_f64();
 
-        // approx_kl = mean((ratio - 1) - log ratio) and the clip fraction, as CleanRL, on the
-        // host from one read of the log ratios.
         let log_ratio: Vec<f32> = log_ratio.to_vec1()?;
-        let count = log_ratio.len().max(1) as f32;
-        let approx_kl = log_ratio.iter().map(|&l| (l.exp() - 1.0) - l).sum::<f32>() / count;
-        let clipfrac = log_ratio
-            .iter()
-            .filter(|&&l| (l.exp() - 1.0).abs() > self.config.clip_coef as f32)
-            .count() as f32
-            / count;
+        let (approx_kl, clipfrac) = kl_and_clipfrac(&log_ratio, self.config.clip_coef as f32);
         stats.policy_loss += policy_loss.to_scalar::<f32>()?;
         stats.value_loss += value_loss.to_scalar::<f32>()?;
         stats.entropy += entropy.to_scalar::<f32>()?;
@@ -394,6 +386,19 @@ impl Ppo {
         stats.timing.bookkeeping += read.elapsed().as_secs_f64();
         Ok(approx_kl)
     }
+}
+
+/// A minibatch's approximate KL, `mean((ratio - 1) - log ratio)`, and the fraction of its
+/// ratios outside `1 +- clip`, from its log ratios on the host (CleanRL's two statistics).
+pub(crate) fn kl_and_clipfrac(log_ratio: &[f32], clip: f32) -> (f32, f32) {
+    let count = log_ratio.len().max(1) as f32;
+    let approx_kl = log_ratio.iter().map(|&l| (l.exp() - 1.0) - l).sum::<f32>() / count;
+    let clipfrac = log_ratio
+        .iter()
+        .filter(|&&l| (l.exp() - 1.0).abs() > clip)
+        .count() as f32
+        / count;
+    (approx_kl, clipfrac)
 }
 
 /// A minibatch's PPO loss as candle tensors (the reference path), with its parts.

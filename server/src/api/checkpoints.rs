@@ -51,21 +51,22 @@ pub async fn list(
     Ok(Json(json!({ "checkpoints": checkpoints })).into_response())
 }
 
-pub async fn get(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
-    let row = state
+/// The stored checkpoint with the id in the path.
+async fn stored(state: &AppState, id: &str) -> Result<crate::store::CheckpointRow, ApiError> {
+    state
         .store
-        .checkpoint(parse_id(&id)?)
+        .checkpoint(parse_id(id)?)
         .await
-        .map_err(|e| ApiError::store("checkpoint", e))?;
+        .map_err(|e| ApiError::store("checkpoint", e))
+}
+
+pub async fn get(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let row = stored(&state, &id).await?;
     Ok(Json(row).into_response())
 }
 
 pub async fn download(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
-    let row = state
-        .store
-        .checkpoint(parse_id(&id)?)
-        .await
-        .map_err(|e| ApiError::store("checkpoint", e))?;
+    let row = stored(&state, &id).await?;
     // Checkpoints are small (about a megabyte): read whole.
     let bytes = tokio::fs::read(state.store.checkpoint_path(&row))
         .await
@@ -93,11 +94,7 @@ pub async fn download(State(state): State<Arc<AppState>>, Path(id): Path<String>
 /// `GET /api/v1/checkpoints/{id}/lineage`: how the checkpoint was made, from its file's
 /// header (only the header is read).
 pub async fn lineage(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
-    let row = state
-        .store
-        .checkpoint(parse_id(&id)?)
-        .await
-        .map_err(|e| ApiError::store("checkpoint", e))?;
+    let row = stored(&state, &id).await?;
     let path = state.store.checkpoint_path(&row);
     let info = tokio::task::spawn_blocking(move || read_info(&path))
         .await

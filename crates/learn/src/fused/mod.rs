@@ -23,6 +23,7 @@ use candle_core::Tensor;
 use crate::error::{Error, Result};
 use crate::network::ActorCritic;
 use crate::optim::{Adam, AdamStep, clip_scale, is_critic};
+use crate::ppo::kl_and_clipfrac;
 use heads::{PolicyLoss, policy_head, value_head};
 use mlp::{Layer, Mlp, Param};
 
@@ -148,44 +149,20 @@ impl Engine {
     /// Copies the networks' parameters to the host and takes their Adam moments from
     /// `adam`; [`Self::store`] puts both back.
     pub fn load(net: &ActorCritic, adam: &mut Adam) -> Result<Self> {
-        let mut actor = Vec::new();
-        let mut critic = Vec::new();
-        let mut log_std = None;
-        let mut pending: Option<(Param, usize, usize)> = None;
-        for (k, (name, var)) in net.params().iter().enumerate() {
-            let value = var.as_tensor().flatten_all()?.to_vec1::<f32>()?;
-            let (m, v) = adam.take_moments(k);
-            let param = Param::new(value, m, v);
-            match (slot(name), var.as_tensor().dims()) {
-                (Slot::LogStd, _) => log_std = Some(param),
-                (_, &[outputs, inputs]) => pending = Some((param, outputs, inputs)),
-                (which, _) => {
-                    let Some((weight, outputs, inputs)) = pending.take() else {
-                        return Err(Error::Length {
-                            what: "weight before bias",
-                            expected: 2,
-                            got: 1,
-                        });
-                    };
-                    let layer = Layer {
-                        weight,
-                        bias: param,
-                        inputs,
-                        outputs,
-                    };
-                    if which == Slot::Critic {
-                        critic.push(layer);
-                    } else {
-                        actor.push(layer);
-                    }
-                }
-            }
-        }
-        let log_std = log_std.ok_or(Error::Length {
-            what: "log std parameter",
-            expected: 1,
-            got: 0,
-        })?;
+        let actor = host_layers(net, Slot::Actor, |k| adam.take_moments(k))?;
+        let critic = host_layers(net, Slot::Critic, |k| adam.take_moments(k))?;
+        let (k, (_, var)) = net
+            .params()
+            .iter()
+            .enumerate()
+            .find(|(_, (name, _))| slot(name) == Slot::LogStd)
+            .ok_or(Error::Length {
+                what: "log std parameter",
+                expected: 1,
+                got: 0,
+            })?;
+        let (m, v) = adam.take_moments(k);
+        let log_std = Param::new(var.as_tensor().flatten_all()?.to_vec1::<f32>()?, m, v);
         Ok(Self {
             actor: Mlp::new(actor),
             log_std,
@@ -253,13 +230,7 @@ impl Engine {
             },
         );
         let (PolicyLoss { loss, entropy }, actor_secs) = policy;
-        let count = log_ratio.len().max(1) as f32;
-        let approx_kl = log_ratio.iter().map(|&l| (l.exp() - 1.0) - l).sum::<f32>() / count;
-        let clipfrac = log_ratio
-            .iter()
-            .filter(|&&l| (l.exp() - 1.0).abs() > coefs.clip)
-            .count() as f32
-            / count;
+        let (approx_kl, clipfrac) = kl_and_clipfrac(log_ratio, coefs.clip);
         MinibatchStats {
             policy_loss: loss,
             value_loss,
@@ -274,14 +245,40 @@ impl Engine {
 /// The critic's values at two batches of inputs (`[rows, width]` each: a rollout's states and
 /// its next states), one batch per core, each in chunks of [`VALUE_CHUNK`] rows.
 pub(crate) fn values(net: &ActorCritic, inputs: [&[f32]; 2]) -> Result<[Vec<f32>; 2]> {
+    let layers = host_layers(net, Slot::Critic, |_| (Vec::new(), Vec::new()))?;
+    let width = net.layout().input_width();
+    let run = |mut critic: Mlp, input: &[f32]| {
+        let mut out = Vec::with_capacity(input.len() / width.max(1));
+        for chunk in input.chunks(VALUE_CHUNK * width) {
+            critic.forward(chunk, chunk.len() / width);
+            out.extend_from_slice(critic.output());
+        }
+        out
+    };
+    let critic = Mlp::new(layers);
+    let (a, b) = rayon::join(
+        || run(critic.clone(), inputs[0]),
+        || run(critic.clone(), inputs[1]),
+    );
+    Ok([a, b])
+}
+
+/// The layers of one network (`want`: the actor's or the critic's) copied to the host, in
+/// order, each parameter with the Adam moments `moments(k)` gives for its index `k` in
+/// [`ActorCritic::params`].
+fn host_layers(
+    net: &ActorCritic,
+    want: Slot,
+    mut moments: impl FnMut(usize) -> (Vec<f32>, Vec<f32>),
+) -> Result<Vec<Layer>> {
     let mut layers = Vec::new();
     let mut pending: Option<(Param, usize, usize)> = None;
-    for (name, var) in net.params() {
-        if slot(name) != Slot::Critic {
+    for (k, (name, var)) in net.params().iter().enumerate() {
+        if slot(name) != want {
             continue;
         }
-        let value = var.as_tensor().flatten_all()?.to_vec1::<f32>()?;
-        let param = Param::new(value, Vec::new(), Vec::new());
+        let (m, v) = moments(k);
+        let param = Param::new(var.as_tensor().flatten_all()?.to_vec1::<f32>()?, m, v);
         match (pending.take(), var.as_tensor().dims()) {
             (None, &[outputs, inputs]) => pending = Some((param, outputs, inputs)),
             (Some((weight, outputs, inputs)), _) => layers.push(Layer {
@@ -299,21 +296,7 @@ pub(crate) fn values(net: &ActorCritic, inputs: [&[f32]; 2]) -> Result<[Vec<f32>
             }
         }
     }
-    let width = net.layout().input_width();
-    let run = |mut critic: Mlp, input: &[f32]| {
-        let mut out = Vec::with_capacity(input.len() / width.max(1));
-        for chunk in input.chunks(VALUE_CHUNK * width) {
-            critic.forward(chunk, chunk.len() / width);
-            out.extend_from_slice(critic.output());
-        }
-        out
-    };
-    let critic = Mlp::new(layers);
-    let (a, b) = rayon::join(
-        || run(critic.clone(), inputs[0]),
-        || run(critic.clone(), inputs[1]),
-    );
-    Ok([a, b])
+    Ok(layers)
 }
 
 /// Rows per forward pass in [`values`]: a few hundred kilobytes of activations per layer.

@@ -76,14 +76,28 @@ fn net(seed: u64) -> ActorCritic {
     net
 }
 
-/// `|a - b|_inf / |b|_inf`.
-fn relative(a: &[f32], b: &[f32]) -> f32 {
+/// `|a - b|_inf`.
+fn max_difference(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());
-    let scale = b.iter().fold(0.0f32, |m, x| m.max(x.abs())).max(1e-12);
     a.iter()
         .zip(b)
         .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()))
-        / scale
+}
+
+/// `|a - b|_inf / |b|_inf`.
+fn relative(a: &[f32], b: &[f32]) -> f32 {
+    let scale = b.iter().fold(0.0f32, |m, x| m.max(x.abs())).max(1e-12);
+    max_difference(a, b) / scale
+}
+
+/// Two learners of `config` from the same seed, one per update engine: `(fused, candle)`.
+fn engines(config: &PpoConfig) -> (Ppo, Ppo) {
+    let make = |engine| {
+        let mut ppo = Ppo::new(LAYOUT, config.clone(), 5).expect("ppo");
+        ppo.set_engine(engine);
+        ppo
+    };
+    (make(UpdateEngine::Fused), make(UpdateEngine::Candle))
 }
 
 #[test]
@@ -187,12 +201,7 @@ fn one_update_gives_the_reference_paths_parameters() {
             learning_rate: 3e-4,
             ..PpoConfig::default()
         };
-        let make = |engine| {
-            let mut ppo = Ppo::new(LAYOUT, config.clone(), 5).expect("ppo");
-            ppo.set_engine(engine);
-            ppo
-        };
-        let (mut fused, mut candle) = (make(UpdateEngine::Fused), make(UpdateEngine::Candle));
+        let (mut fused, mut candle) = engines(&config);
         let r = rollout(&fused.net, 1024, 9);
         let a = fused.update(&r, 0.0).expect("fused update");
         let b = candle.update(&r, 0.0).expect("candle update");
@@ -207,14 +216,7 @@ fn one_update_gives_the_reference_paths_parameters() {
             candle.net.flat_params().expect("params"),
         );
         let start = net(5).flat_params().expect("params");
-        let worst = pa
-            .iter()
-            .zip(&pb)
-            .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
-        let moved = pb
-            .iter()
-            .zip(&start)
-            .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+        let (worst, moved) = (max_difference(&pa, &pb), max_difference(&pb, &start));
         assert!(
             worst < 1e-5,
             "minibatch {minibatch}: parameters differ by {worst}"
@@ -232,12 +234,7 @@ fn an_update_after_behaviour_cloning_gives_the_reference_paths_parameters() {
         rollout_steps: 64,
         ..PpoConfig::default()
     };
-    let make = |engine| {
-        let mut ppo = Ppo::new(LAYOUT, config.clone(), 5).expect("ppo");
-        ppo.set_engine(engine);
-        ppo
-    };
-    let (mut fused, mut candle) = (make(UpdateEngine::Fused), make(UpdateEngine::Candle));
+    let (mut fused, mut candle) = engines(&config);
     let demo = rollout(&fused.net, 60, 3);
     let demos = crate::Demos {
         states: demo.states.clone(),
@@ -260,9 +257,6 @@ fn an_update_after_behaviour_cloning_gives_the_reference_paths_parameters() {
         fused.net.flat_params().expect("params"),
         candle.net.flat_params().expect("params"),
     );
-    let worst = pa
-        .iter()
-        .zip(&pb)
-        .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+    let worst = max_difference(&pa, &pb);
     assert!(worst < 1e-5, "parameters differ by {worst}: {a:?} vs {b:?}");
 }
