@@ -1,6 +1,7 @@
 //! A world folder through the `crm` binary, as a user runs it: check, oracle on two tasks, two
 //! training iterations, evaluation and a recording; a checkpoint from another hand refused;
-//! a broken world refused with exit code 2 naming the file and the field.
+//! a broken world refused with exit code 2 naming the file and the field; a world drafted by
+//! `crm world init` for a four-finger hand.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -19,8 +20,9 @@ fn crm(root: &Path, args: &[&str]) -> (i32, String, String) {
     )
 }
 
-fn test_world() -> PathBuf {
-    let root = std::env::temp_dir().join(format!("crm-cli-world-{}", std::process::id()));
+/// A fresh test world (`scripts/make-test-world`) in a folder of its own per test.
+fn test_world(tag: &str) -> PathBuf {
+    let root = std::env::temp_dir().join(format!("crm-cli-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/make-test-world");
     let status = Command::new("python3")
@@ -32,9 +34,40 @@ fn test_world() -> PathBuf {
     root
 }
 
+/// Two training iterations of 128 steps in `world`, written to `out`.
+fn train_two_iterations(root: &Path, world: &Path, out: &Path) {
+    let config = root.join("ppo.json");
+    std::fs::write(
+        &config,
+        r#"{"rollout_steps": 128, "minibatch_size": 64, "hidden": [32]}"#,
+    )
+    .expect("config");
+    let (code, _, stderr) = crm(
+        root,
+        &[
+            "train",
+            "--world",
+            world.to_str().expect("utf-8"),
+            "--steps",
+            "256",
+            "--envs",
+            "2",
+            "--seed",
+            "3",
+            "--config",
+            config.to_str().expect("utf-8"),
+            "--out",
+            out.to_str().expect("utf-8"),
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let metrics = std::fs::read_to_string(out.join("metrics.jsonl")).expect("metrics");
+    assert_eq!(metrics.lines().count(), 2, "two iterations of 128 steps");
+}
+
 #[test]
 fn a_world_folder_round_trip_and_a_checkpoint_from_another_hand_refused() {
-    let root = test_world();
+    let root = test_world("world");
     let world = root.join("world");
     let world_arg = world.to_str().expect("utf-8 path");
 
@@ -70,33 +103,7 @@ fn a_world_folder_round_trip_and_a_checkpoint_from_another_hand_refused() {
     assert_eq!(oracle["episodes"], 2);
 
     let out = root.join("run");
-    let config = root.join("ppo.json");
-    std::fs::write(
-        &config,
-        r#"{"rollout_steps": 128, "minibatch_size": 64, "hidden": [32]}"#,
-    )
-    .expect("config");
-    let (code, _, stderr) = crm(
-        &root,
-        &[
-            "train",
-            "--world",
-            world_arg,
-            "--steps",
-            "256",
-            "--envs",
-            "2",
-            "--seed",
-            "3",
-            "--config",
-            config.to_str().expect("utf-8"),
-            "--out",
-            out.to_str().expect("utf-8"),
-        ],
-    );
-    assert_eq!(code, 0, "{stderr}");
-    let metrics = std::fs::read_to_string(out.join("metrics.jsonl")).expect("metrics");
-    assert_eq!(metrics.lines().count(), 2, "two iterations of 128 steps");
+    train_two_iterations(&root, &world, &out);
     let checkpoint = out.join("crm-ppo.safetensors");
     let checkpoint = checkpoint.to_str().expect("utf-8");
 
@@ -192,5 +199,51 @@ fn a_world_folder_round_trip_and_a_checkpoint_from_another_hand_refused() {
             "{args:?}: {stderr}"
         );
     }
+    std::fs::remove_dir_all(root).ok();
+}
+
+/// `crm world init` drafts a world for the test world's four-finger hand that `crm world
+/// check` loads, and two training iterations run there with the little finger's action
+/// masked.
+#[test]
+fn a_drafted_four_finger_world_checks_and_trains() {
+    let root = test_world("init");
+    let out = root.join("drafted");
+    let out_arg = out.to_str().expect("utf-8");
+    let hand = root.join("assets/my_hand/urdf/hand4.urdf");
+    let (code, stdout, stderr) = crm(
+        &root,
+        &[
+            "world",
+            "init",
+            "--hand",
+            hand.to_str().expect("utf-8"),
+            "--out",
+            out_arg,
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let mut lines = stdout.lines();
+    let first: serde_json::Value =
+        serde_json::from_str(lines.next().expect("a first line")).expect("the world's line");
+    assert_eq!(first["world"], "hand4");
+    assert_eq!(first["hand"]["fingers"], 4);
+    let rest: Vec<&str> = lines.collect();
+    assert!(rest[0].starts_with("confirm in "), "{stdout}");
+    assert!(
+        rest.iter().any(|l| l.contains("little left out")),
+        "{stdout}"
+    );
+    let (code, stdout, stderr) = crm(&root, &["world", "check", out_arg]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("\"fingers\":4"), "{stdout}");
+    let (code, _, stderr) = crm(
+        &root,
+        &["world", "init", "--hand", "nowhere.urdf", "--out", out_arg],
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("not empty"), "{stderr}");
+
+    train_two_iterations(&root, &root.join("world4"), &root.join("run4"));
     std::fs::remove_dir_all(root).ok();
 }

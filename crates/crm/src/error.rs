@@ -6,11 +6,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// The spec file could not be read.
-    #[error("cannot read crm spec {path}: {source}")]
+    /// The cause is part of the message and not a `source()` too, so a chain printed with
+    /// `{:#}` says it once.
+    #[error("cannot read crm spec {path}: {error}")]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The spec is not valid JSON for [`crate::Spec`]; `path` is the file (or `<inline>`).
     #[error("malformed crm spec {path} at line {line}, column {column}: {message}")]

@@ -3,13 +3,10 @@
 /// Everything that can go wrong while loading the benchmark or stepping the world.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// A data file could not be read.
-    #[error("cannot read {path}: {source}")]
-    Io {
-        path: String,
-        #[source]
-        source: std::io::Error,
-    },
+    /// A data file could not be read. The cause is part of the message and not a
+    /// `source()` too, so a chain printed with `{:#}` says it once.
+    #[error("cannot read {path}: {error}")]
+    Io { path: String, error: std::io::Error },
     /// A data file is not valid JSON for its type.
     #[error("malformed {path} at line {line}, column {column}: {message}")]
     Parse {
@@ -57,9 +54,9 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// A data file's text, or [`Error::Io`] naming it.
 pub(crate) fn read_text(path: &std::path::Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| Error::Io {
+    std::fs::read_to_string(path).map_err(|error| Error::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })
 }
 
@@ -83,4 +80,19 @@ pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, path: &str)
         column: err.column(),
         message: err.to_string(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_missing_file_says_its_cause_once() {
+        let err = super::read_text(std::path::Path::new("/nonexistent/hand.json"))
+            .expect_err("no such file");
+        let chain = format!("{:#}", anyhow::Error::from(err));
+        assert!(
+            chain.starts_with("cannot read /nonexistent/hand.json: "),
+            "{chain}"
+        );
+        assert_eq!(chain.matches("os error 2").count(), 1, "{chain}");
+    }
 }

@@ -30,6 +30,7 @@ pub mod error;
 pub mod events;
 pub mod hand;
 pub mod import;
+pub mod init;
 pub mod observation;
 pub mod oracle;
 pub mod ready;

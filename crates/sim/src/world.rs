@@ -22,7 +22,7 @@ use crate::error::{Error, Result, parse_json, read_text};
 use crate::hand::HandModel;
 use crate::hand::description::{Description, Source};
 use crate::hand::profile::Profile;
-use crate::observation::FEATURES;
+use crate::observation::{ACTIONS, FEATURES};
 
 /// `world.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -124,12 +124,30 @@ impl World {
         }
     }
 
-    /// The world's CRM: the machine of its spec, or the built-in grasping machine.
+    /// The world's CRM: the machine of its spec, or the built-in grasping machine. The
+    /// action of a finger the hand lacks is left out of every stage's action set, so the
+    /// policy's mask hides it; the action space and the spec's file stay the paper's.
     pub fn machine(&self) -> Result<crm::Machine> {
-        match &self.spec {
-            Some(spec) => Ok(crm::Machine::from_spec(spec.clone())?),
-            None => Ok(crate::spec::grasping_machine()),
+        let missing: Vec<&str> = self
+            .benchmark
+            .hand
+            .fingers
+            .iter()
+            .zip(&ACTIONS[3..])
+            .filter(|(finger, _)| !finger.present)
+            .map(|(_, &name)| name)
+            .collect();
+        if missing.is_empty() {
+            return match &self.spec {
+                Some(spec) => Ok(crm::Machine::from_spec(spec.clone())?),
+                None => Ok(crate::spec::grasping_machine()),
+            };
         }
+        let mut spec = self.spec.clone().unwrap_or_else(crate::spec::grasping_spec);
+        for stage in &mut spec.stages {
+            stage.actions.retain(|a| !missing.contains(&a.dim.as_str()));
+        }
+        Ok(crm::Machine::from_spec(spec)?)
     }
 
     /// Loads the world in `dir`, finding files through `CRM_ASSETS`.
@@ -264,7 +282,7 @@ impl World {
                 "source": self.source,
                 "links": hand.links.len(),
                 "joints": hand.revolute_joints(),
-                "fingers": 5,
+                "fingers": hand.fingers.iter().filter(|f| f.present).count(),
             },
             "objects": self.benchmark.objects.len(),
             "tasks": self.benchmark.tasks.len(),

@@ -1,8 +1,9 @@
 //! Worlds from files: an MJCF hand (the built-in one) and a URDF hand (made by
 //! `scripts/make-test-world`) couple their joints as the paper does, mesh paths resolve,
 //! a non-convex mesh object is decomposed and rests on the table, bad worlds are refused
-//! naming the file and the field, and in the Adroit world only the arm's execution passes the
-//! judge.
+//! naming the file and the field (with the closest names, and profile values checked against
+//! the joints' limits), a four-finger hand masks the missing finger's action, and in the
+//! Adroit world only the arm's execution passes the judge.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -182,6 +183,8 @@ enum Edit {
     Replace(&'static str, &'static str),
     /// The whole file.
     Whole(&'static str),
+    /// The file as JSON, changed by the function.
+    Json(fn(&mut serde_json::Value)),
 }
 
 /// Applies `edit` to `file` in the world folder and returns the load error.
@@ -194,6 +197,11 @@ fn broken(root: &Path, file: &str, edit: &Edit) -> String {
             text.replacen(from, to, 1)
         }
         Edit::Whole(whole) => whole.to_string(),
+        Edit::Json(change) => {
+            let mut value: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+            change(&mut value);
+            value.to_string()
+        }
     };
     std::fs::write(&path, changed).expect("write");
     let err = World::load_with(&root.join("world"), &assets(root))
@@ -205,7 +213,7 @@ fn broken(root: &Path, file: &str, edit: &Edit) -> String {
 
 #[test]
 fn bad_worlds_are_refused_naming_the_file_and_the_field() {
-    use Edit::{Replace, Whole};
+    use Edit::{Json, Replace, Whole};
     let root = test_world("bad");
     let cases = [
         (
@@ -216,7 +224,39 @@ fn bad_worlds_are_refused_naming_the_file_and_the_field() {
         (
             "world/hand.json",
             Replace("\"index_dip\"", "\"index_tip\""),
-            &["hand.json", "fingers.index.joints[2].joint", "index_tip"],
+            &[
+                "hand.json",
+                "fingers.index.joints[2].joint",
+                "index_tip",
+                "did you mean",
+                "\"index_dip\"",
+            ],
+        ),
+        (
+            "world/hand.json",
+            Json(|hand| hand["palm"] = "plam".into()),
+            &["hand.json", "palm", "did you mean \"palm\"?"],
+        ),
+        (
+            "world/hand.json",
+            Json(|hand| hand["fingers"]["index"]["range"] = serde_json::json!([0.0, 3.5])),
+            &[
+                "hand.json",
+                "fingers.index.range",
+                "3.5",
+                "\"index_pip\" [-0.2, 2]",
+            ],
+        ),
+        (
+            "world/hand.json",
+            Json(|hand| {
+                let joints = hand["fingers"]["little"]["joints"]
+                    .as_array_mut()
+                    .expect("joints");
+                joints.retain(|j| j["joint"] != "little_dip");
+                hand["held"] = serde_json::json!({ "little_dip": 2.5 });
+            }),
+            &["hand.json", "held.little_dip", "2.5", "limits [-0.2, 2]"],
         ),
         (
             "world/hand.json",
@@ -392,4 +432,101 @@ fn only_the_arms_execution_passes_the_judge() {
     }
     // The episodes end (a failure or a success), not at the episode limit.
     assert!(ended.iter().all(|l| l != "truncated"), "{ended:?}");
+}
+
+/// A four-finger hand (`world4/`: no little finger, as Allegro and LEAP): the little finger's
+/// action stays in the 8-dimensional action space but is masked in every stage, the hand
+/// grasps with the fingers it has, and a topology that names the missing finger is refused.
+#[test]
+fn a_four_finger_hand_masks_the_missing_fingers_action() {
+    use grasp_sim::oracle::run_episode;
+    let root = test_world("four");
+    let four = World::load_with(&root.join("world4"), &assets(&root)).expect("world4 loads");
+    let five = load(&root);
+    assert_eq!(four.summary()["hand"]["fingers"], 4);
+    assert_eq!(five.summary()["hand"]["fingers"], 5);
+    assert_ne!(four.hash, five.hash);
+    let (machine4, machine5) = (
+        four.machine().expect("machine"),
+        five.machine().expect("machine"),
+    );
+    assert_eq!(machine4.action_count(), 8);
+    let grasp = machine4.stage_id("grasp").expect("a grasp stage");
+    let (mask4, mask5) = (machine4.action_mask(grasp), machine5.action_mask(grasp));
+    assert_eq!(mask5[7], 1.0, "{mask5:?}");
+    assert_eq!(mask4[7], 0.0, "{mask4:?}");
+    assert_eq!(mask4[..7], mask5[..7]);
+    // Every task runs to an end with the fingers the hand has.
+    for task in 0..four.benchmark.tasks.len() {
+        let env = GraspEnv::new(four.benchmark.clone(), SimConfig::deterministic());
+        let (episode, _) = run_episode(env, machine4.clone(), task, 0).expect("an episode");
+        assert_ne!(episode.label, "truncated", "{episode:?}");
+    }
+    let hand = root.join("world4/hand.json");
+    let text = std::fs::read_to_string(&hand).expect("profile");
+    let mut profile: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    profile["topologies"]["pPdAb25"]["active"]
+        .as_array_mut()
+        .expect("active")
+        .push("little".into());
+    std::fs::write(&hand, profile.to_string()).expect("write");
+    let err = World::load_with(&root.join("world4"), &assets(&root))
+        .expect_err("a topology with the missing finger")
+        .to_string();
+    assert!(
+        err.contains("topologies.pPdAb25.active") && err.contains("no little finger"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(root).ok();
+}
+
+/// `crm world init` on the test world's hands: the draft finds the palm, the thumb, the
+/// fingers' command joints and the axes the hand-written profile gives, and loads.
+#[test]
+fn a_world_drafted_from_the_test_hands_description_loads_with_its_profiles_choices() {
+    use grasp_sim::init::init_world;
+    let root = test_world("init");
+    let assets = assets(&root);
+    let written = World::load_with(&root.join("world"), &assets).expect("world");
+    for (urdf, fingers) in [("hand.urdf", 5), ("hand4.urdf", 4)] {
+        let out = root.join(format!("drafted-{fingers}"));
+        let hand = root.join("assets/my_hand/urdf").join(urdf);
+        let drafted = init_world(&hand, &out, None, None, &assets).expect("a draft");
+        assert_eq!(drafted.world.summary()["hand"]["fingers"], fingers);
+        let profile: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("hand.json")).expect("hand.json"),
+        )
+        .expect("JSON");
+        assert_eq!(profile["description"], format!("my_hand/urdf/{urdf}"));
+        assert_eq!(profile["palm"], "palm");
+        assert_eq!(profile["fingers"]["thumb"]["command"], "thumb_tmcp");
+        assert_eq!(profile["fingers"]["index"]["command"], "index_pip");
+        assert_eq!(
+            profile["fingers"]["index"]["joints"][0]["joint"],
+            "index_mcp"
+        );
+        assert_eq!(
+            profile["approach_axis"],
+            serde_json::json!([0.0, 0.0, -1.0])
+        );
+        assert_eq!(profile["finger_axis"], serde_json::json!([1.0, 0.0, 0.0]));
+        assert_eq!(profile["fingers"].get("little").is_some(), fingers == 5);
+        assert!(
+            drafted.notes.iter().any(|n| n.contains("thumb")),
+            "{:?}",
+            drafted.notes
+        );
+        if fingers == 5 {
+            assert_eq!(
+                drafted.world.benchmark.hand.links.len(),
+                written.benchmark.hand.links.len()
+            );
+        }
+        // A second init into the same folder is refused and changes nothing.
+        let err = init_world(&hand, &out, None, None, &assets)
+            .expect_err("not empty")
+            .to_string();
+        assert!(err.contains("not empty"), "{err}");
+    }
+    std::fs::remove_dir_all(root).ok();
 }

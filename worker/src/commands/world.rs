@@ -1,6 +1,8 @@
 //! `crm world check DIR`: load a world folder as every command would and print what it holds.
 //! `crm world import-dexmobile PATH --out DIR`: write the paper's own world from a copy of the
 //! authors' repository (`grasp_sim::import::dexmobile`), pointing at its files.
+//! `crm world init --hand FILE --out DIR`: draft a world for a hand from its description alone
+//! (`grasp_sim::init`) and print the guesses to confirm.
 
 use std::path::PathBuf;
 
@@ -16,6 +18,29 @@ pub enum WorldCommand {
     /// the world names PATH in its `assets`. Exits 2 naming the file (and the CSV's line and
     /// column) that is wrong, with nothing written.
     ImportDexmobile(ImportArgs),
+    /// Draft a world folder for a hand from its URDF or MJCF description alone: the palm, the
+    /// finger chains and their command joints, couplings, ranges, axes and a grasp point,
+    /// loaded back as `crm world check` loads it. Prints the world's line, then each guess
+    /// to confirm. Nothing is written when the draft does not load.
+    Init(InitArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct InitArgs {
+    /// The hand's description (`.urdf`, or an MJCF `.xml` scene); its meshes and includes are
+    /// found beside it or through `CRM_ASSETS`.
+    #[arg(long)]
+    pub hand: PathBuf,
+    /// The world folder to write; it must not exist, or be empty.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The world's name (default: the description's file name).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// The palm link, where the rules would pick another (the first link where three or more
+    /// moving chains branch).
+    #[arg(long)]
+    pub palm: Option<String>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -59,6 +84,25 @@ pub fn run(command: WorldCommand) -> anyhow::Result<()> {
                 "hash": imported.hash,
             });
             emit(&format!("{line}\n"))
+        }
+        WorldCommand::Init(args) => {
+            let assets = grasp_sim::assets::Assets::from_env();
+            let drafted = grasp_sim::init::init_world(
+                &args.hand,
+                &args.out,
+                args.name.as_deref(),
+                args.palm.as_deref(),
+                &assets,
+            )?;
+            let mut text = format!(
+                "{}\nconfirm in {}:\n",
+                drafted.world.summary(),
+                args.out.join("hand.json").display()
+            );
+            for note in &drafted.notes {
+                text.push_str(&format!("- {note}\n"));
+            }
+            emit(&text)
         }
     }
 }

@@ -215,9 +215,9 @@ pub fn load(
     axis_angle: [f32; 3],
     decomposition: &Decomposition,
 ) -> Result<MeshGeometry> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Io {
+    let bytes = std::fs::read(path).map_err(|error| Error::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })?;
     let raw = match path
         .extension()

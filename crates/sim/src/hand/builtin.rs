@@ -21,6 +21,7 @@ pub fn load() -> Result<HandModel> {
         DESCRIPTION,
         Path::new("worlds/crm/hand.xml"),
         Path::new("."),
+        &crate::assets::Assets::default(),
     )?;
     HandModel::new(&description, &profile, Path::new("worlds/crm/hand.json"))
 }

@@ -5,17 +5,23 @@
 //!
 //! Both loaders are wrapped where they would be silent or wrong (measured with 0.36.1):
 //! `rapier3d-urdf` joins `package://` paths to a folder as plain text and drops a mesh it
-//! cannot open without a word, and `rapier3d-mjcf` refuses files whose `<include>`d parts have
-//! `<mujocoinclude>` roots. Mesh paths are resolved here (see [`crate::assets`]) and a missing
-//! mesh is an error naming it; includes are expanded (`includes.rs`) before the MJCF is parsed.
+//! cannot open without a word, `rapier3d-mjcf` skips a mesh it cannot find with a log line and
+//! refuses files whose `<include>`d parts have `<mujocoinclude>` roots, and both read `nan` as
+//! a number. Mesh paths are resolved here (see [`crate::assets`], `meshes.rs`) and a missing
+//! mesh is an error naming it; includes are expanded (`includes.rs`) before the MJCF is parsed;
+//! numbers are checked in every file read (`numbers.rs`); a file that is only a part of a model
+//! is refused, naming the files that include it.
 
 use std::path::Path;
 
 use rapier3d::prelude::*;
+use rapier3d_mjcf::mjcf_rs::Model;
 use rapier3d_mjcf::{MjcfLoaderOptions, MjcfRobot};
 use rapier3d_urdf::{UrdfLoaderOptions, UrdfRobot, urdf_rs};
 
-use super::includes::expand_includes;
+use super::includes::{Expansion, fragment_reason, includers};
+use super::meshes::resolve as resolve_meshes;
+use super::numbers::{self, Format};
 use crate::assets::Assets;
 use crate::error::{Result, invalid_at as invalid, read_text as read};
 
@@ -129,7 +135,7 @@ impl Description {
         let base = path.parent().unwrap_or(Path::new("."));
         match path.extension().and_then(|e| e.to_str()) {
             Some("urdf") => Self::from_urdf(&text, path, base, assets),
-            Some("xml" | "mjcf") => Self::from_mjcf(&text, path, base),
+            Some("xml" | "mjcf") => Self::from_mjcf(&text, path, base, assets),
             _ => Err(invalid(
                 path,
                 "description",
@@ -138,16 +144,34 @@ impl Description {
         }
     }
 
-    /// Parses MJCF text; `path` names it in errors, `base` resolves its includes and meshes.
-    pub fn from_mjcf(text: &str, path: &Path, base: &Path) -> Result<Self> {
-        let expanded = expand_includes(text, path, base, 0)?;
+    /// Parses MJCF text; `path` names it in errors, `base` (its folder) and `assets` resolve
+    /// its includes and meshes.
+    pub fn from_mjcf(text: &str, path: &Path, base: &Path, assets: &Assets) -> Result<Self> {
+        let expanded = Expansion::new(base, assets).expand(text, path, 0)?;
+        if let Some(reason) = fragment_reason(&expanded) {
+            let instead: Vec<String> = includers(path)
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect();
+            let hint = match instead.as_slice() {
+                [] => "load the model file that includes it".to_string(),
+                files => format!("load the file that includes it: {}", files.join(" or ")),
+            };
+            return Err(invalid(
+                path,
+                "mujoco",
+                format!("this file is a part meant to be included ({reason}); {hint}"),
+            ));
+        }
         let options = MjcfLoaderOptions {
             disable_joint_motors: true,
             mesh_converter: Some(MeshConverter::ConvexHull),
             ..MjcfLoaderOptions::default()
         };
-        let (robot, model) = MjcfRobot::from_str(&expanded, options, base)
+        let mut model = Model::from_str(&expanded, base)
             .map_err(|err| invalid(path, "mujoco", format!("{err:#}")))?;
+        resolve_meshes(&mut model, base, assets, path)?;
+        let robot = MjcfRobot::from_model(&model, options, base);
         let links = robot
             .bodies
             .iter()
@@ -209,6 +233,7 @@ impl Description {
     /// Parses URDF text; mesh files are resolved (`package://NAME/...`, relative to `base`,
     /// or found through `assets`) before `rapier3d-urdf` sees them.
     pub fn from_urdf(text: &str, path: &Path, base: &Path, assets: &Assets) -> Result<Self> {
+        numbers::check(text, path, Format::Urdf)?;
         let mut robot = urdf_rs::read_from_string(text)
             .map_err(|err| invalid(path, "robot", err.to_string()))?;
         for link in &mut robot.links {
@@ -225,8 +250,9 @@ impl Description {
                             path,
                             format!("link {name:?} {kind} mesh"),
                             format!(
-                                "mesh {filename:?} not found (relative to {}, in a package of CRM_ASSETS, or in CRM_ASSETS)",
-                                base.display()
+                                "mesh {filename:?} not found; searched relative to {}, its ancestors for a package://, then each CRM_ASSETS folder ({})",
+                                base.display(),
+                                searched_folders(assets)
                             ),
                         )
                     })?;
@@ -318,6 +344,20 @@ impl Description {
 
     pub fn joint(&self, name: &str) -> Option<usize> {
         self.joints.iter().position(|j| j.name == name)
+    }
+}
+
+/// The `CRM_ASSETS` folders, for errors.
+fn searched_folders(assets: &Assets) -> String {
+    if assets.folders.is_empty() {
+        "CRM_ASSETS is not set".to_string()
+    } else {
+        let folders: Vec<String> = assets
+            .folders
+            .iter()
+            .map(|f| f.display().to_string())
+            .collect();
+        folders.join(", ")
     }
 }
 

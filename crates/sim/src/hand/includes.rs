@@ -1,131 +1,249 @@
 //! MJCF `<include>`s expanded into one document before `rapier3d-mjcf` parses it: the loader
 //! refuses included files whose root is `<mujocoinclude>` (measured with 0.36.1), which is how
-//! gymnasium-robotics ships Adroit's parts. MuJoCo resolves include paths against the main
-//! file's folder, as here.
+//! gymnasium-robotics ships Adroit's parts.
+//!
+//! Every form MuJoCo accepts is taken: `<include file="..."/>` and `<include
+//! file="..."></include>`, nested to any depth below 16. A file is looked up relative to the
+//! file that includes it, then to the main file's folder (MuJoCo's own rule), then in each
+//! `CRM_ASSETS` folder; a miss names every place searched. Each file read is checked for
+//! non-finite or malformed numbers (`numbers.rs`) before it is spliced in, so an error names
+//! the file the user wrote.
 
 use std::path::{Path, PathBuf};
 
+use crate::assets::Assets;
 use crate::error::{Result, invalid_at as invalid, read_text as read};
 
-/// Replaces each `<include file="..."/>` with the children of the included file's root
-/// (`<mujoco>` or `<mujocoinclude>`), recursively. MuJoCo resolves include paths against the
-/// main file's folder, as here.
-pub fn expand_includes(text: &str, path: &Path, base: &Path, depth: usize) -> Result<String> {
-    if depth > 16 {
-        return Err(invalid(
-            path,
-            "include",
-            "includes nest deeper than 16 files",
-        ));
-    }
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    while let Some(start) = find_tag(rest, "include") {
-        out.push_str(&rest[..start]);
-        let Some(len) = rest[start..].find('>') else {
-            return Err(invalid(path, "include", "unterminated <include> element"));
-        };
-        let tag = &rest[start..start + len + 1];
-        let file = attribute(tag, "file")
-            .ok_or_else(|| invalid(path, "include", "an <include> without a file attribute"))?;
-        let included: PathBuf = base.join(&file);
-        let inner = read(&included)?;
-        out.push_str(&expand_includes(
-            root_children(&inner, &included)?,
-            &included,
-            base,
-            depth + 1,
-        )?);
-        rest = &rest[start + len + 1..];
-    }
-    out.push_str(rest);
-    Ok(out)
+/// Where a document's includes are searched and which files it read.
+pub struct Expansion<'a> {
+    /// The main file's folder.
+    pub base: &'a Path,
+    pub assets: &'a Assets,
+    /// Every file read, the main one first.
+    pub files: Vec<PathBuf>,
 }
 
-/// Where an element named `name` opens in `text` (not one whose name merely starts so).
+impl<'a> Expansion<'a> {
+    pub fn new(base: &'a Path, assets: &'a Assets) -> Self {
+        Self {
+            base,
+            assets,
+            files: Vec::new(),
+        }
+    }
+
+    /// `text` (the file `path`) with each `<include>` replaced by the children of the
+    /// included file's root (`<mujoco>` or `<mujocoinclude>`), recursively.
+    pub fn expand(&mut self, text: &str, path: &Path, depth: usize) -> Result<String> {
+        if depth > 16 {
+            return Err(invalid(
+                path,
+                "include",
+                "includes nest deeper than 16 files",
+            ));
+        }
+        super::numbers::check(text, path, super::numbers::Format::Mjcf)?;
+        self.files.push(path.to_path_buf());
+        let mut out = String::with_capacity(text.len());
+        let mut rest = text;
+        while let Some(start) = find_tag(rest, "include") {
+            out.push_str(&rest[..start]);
+            let Some(len) = rest[start..].find('>') else {
+                return Err(invalid(path, "include", "unterminated <include> element"));
+            };
+            let tag = &rest[start..start + len + 1];
+            let file = attribute(tag, "file")
+                .ok_or_else(|| invalid(path, "include", "an <include> without a file attribute"))?;
+            let included = self.find(&file, path)?;
+            let inner = read(&included)?;
+            let children = root_children(&inner, &included)?;
+            out.push_str(&self.expand(children, &included, depth + 1)?);
+            rest = &rest[start + len + 1..];
+            if !tag.ends_with("/>") {
+                // `<include file="..."></include>`: the closing tag goes with it.
+                let after = rest.trim_start();
+                let Some(closed) = after.strip_prefix("</include") else {
+                    return Err(invalid(
+                        path,
+                        format!("include {file:?}"),
+                        "an <include> must be empty: `<include file=\"...\"/>` or `<include file=\"...\"></include>`",
+                    ));
+                };
+                let Some(end) = closed.find('>') else {
+                    return Err(invalid(path, "include", "unterminated </include> tag"));
+                };
+                rest = &closed[end + 1..];
+            }
+        }
+        out.push_str(rest);
+        Ok(out)
+    }
+
+    /// An included file: relative to the including file, the main file's folder, then
+    /// `CRM_ASSETS`.
+    fn find(&self, file: &str, from: &Path) -> Result<PathBuf> {
+        let name = Path::new(file);
+        let mut searched: Vec<PathBuf> = Vec::new();
+        if name.is_absolute() {
+            searched.push(name.to_path_buf());
+        } else {
+            let own = from.parent().unwrap_or(Path::new("."));
+            for folder in [own, self.base]
+                .into_iter()
+                .chain(self.assets.folders.iter().map(PathBuf::as_path))
+            {
+                let candidate = folder.join(name);
+                if !searched.contains(&candidate) {
+                    searched.push(candidate);
+                }
+            }
+        }
+        if let Some(found) = searched.iter().find(|p| p.is_file()) {
+            return Ok(found.clone());
+        }
+        let places: Vec<String> = searched.iter().map(|p| p.display().to_string()).collect();
+        Err(invalid(
+            from,
+            format!("include {file:?}"),
+            format!(
+                "the included file was not found; searched {} (relative to the including file, the main file's folder, then each CRM_ASSETS folder)",
+                places.join(", ")
+            ),
+        ))
+    }
+}
+
+/// Whether `text`'s root is `<mujocoinclude>` or it declares no `<worldbody>`: a part meant
+/// to be included by another file, not a model to load.
+pub fn fragment_reason(text: &str) -> Option<&'static str> {
+    if root_name(text) == Some("mujocoinclude") {
+        Some("its root is <mujocoinclude>")
+    } else if find_tag(text, "worldbody").is_none() {
+        Some("it has no <worldbody>")
+    } else {
+        None
+    }
+}
+
+/// The `.xml` files beside `path` and in its parent folder that include it by name: what a
+/// user who loaded a fragment meant to load.
+pub fn includers(path: &Path) -> Vec<PathBuf> {
+    let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+        return Vec::new();
+    };
+    let folder = path.parent().unwrap_or(Path::new("."));
+    let mut found = Vec::new();
+    for dir in [Some(folder), folder.parent()].into_iter().flatten() {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            continue;
+        };
+        let mut files: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().and_then(|e| e.to_str()) == Some("xml") && p != path)
+            .collect();
+        files.sort();
+        for file in files {
+            let Ok(text) = std::fs::read_to_string(&file) else {
+                continue;
+            };
+            let mut rest = text.as_str();
+            while let Some(at) = find_tag(rest, "include") {
+                let tag = &rest[at..rest[at..].find('>').map_or(rest.len(), |e| at + e)];
+                if attribute(tag, "file").is_some_and(|f| f.ends_with(name)) {
+                    found.push(file.clone());
+                    break;
+                }
+                rest = &rest[at + 1..];
+            }
+        }
+    }
+    found
+}
+
+/// Where an element named `name` opens in `text`, outside comments (not one whose name
+/// merely starts so).
 fn find_tag(text: &str, name: &str) -> Option<usize> {
     let pattern = format!("<{name}");
     let mut from = 0;
-    while let Some(at) = text[from..].find(&pattern) {
-        let at = from + at;
-        let next = text[at + pattern.len()..].chars().next();
-        if matches!(next, Some(c) if c.is_whitespace() || c == '/' || c == '>') {
-            return Some(at);
+    loop {
+        let at = from + text[from..].find('<')?;
+        let rest = &text[at..];
+        if rest.starts_with("<!--") {
+            from = at + rest.find("-->").map_or(rest.len(), |e| e + 3);
+            continue;
         }
-        from = at + pattern.len();
+        if rest.starts_with(&pattern) {
+            let next = rest[pattern.len()..].chars().next();
+            if matches!(next, Some(c) if c.is_whitespace() || c == '/' || c == '>') {
+                return Some(at);
+            }
+        }
+        from = at + 1;
     }
-    None
 }
 
 fn attribute(tag: &str, name: &str) -> Option<String> {
-    let at = tag.find(&format!("{name}="))? + name.len() + 1;
-    let quote = tag[at..].chars().next()?;
-    let value = &tag[at + 1..];
-    Some(value[..value.find(quote)?].to_string())
+    let mut from = 0;
+    loop {
+        let at = from + tag[from..].find(&format!("{name}="))?;
+        from = at + name.len() + 1;
+        // A whole attribute name, not the end of a longer one (`meshfile=`).
+        if at > 0 && !tag[..at].ends_with(char::is_whitespace) {
+            continue;
+        }
+        let quote = tag[from..].chars().next()?;
+        let value = &tag[from + 1..];
+        return Some(value[..value.find(quote)?].to_string());
+    }
 }
 
-/// The text between the root element's start and end tags, skipping the XML declaration and
-/// comments before it.
-fn root_children<'a>(text: &'a str, path: &Path) -> Result<&'a str> {
+/// The root element's name, after the XML declaration and comments.
+fn root_name(text: &str) -> Option<&str> {
+    let at = root_start(text)?;
+    let rest = &text[at + 1..];
+    let end = rest
+        .find(|c: char| c.is_whitespace() || c == '>' || c == '/')
+        .unwrap_or(rest.len());
+    Some(&rest[..end])
+}
+
+fn root_start(text: &str) -> Option<usize> {
     let mut at = 0;
     loop {
-        let Some(open) = text[at..].find('<') else {
-            return Err(invalid(path, "mujoco", "no root element"));
-        };
-        let open = at + open;
+        let open = at + text[at..].find('<')?;
         let rest = &text[open..];
         if rest.starts_with("<?") {
             at = open + rest.find("?>").map_or(rest.len(), |e| e + 2);
         } else if rest.starts_with("<!--") {
             at = open + rest.find("-->").map_or(rest.len(), |e| e + 3);
+        } else if rest.starts_with("<!") {
+            at = open + rest.find('>').map_or(rest.len(), |e| e + 1);
         } else {
-            let name_end = rest[1..]
-                .find(|c: char| c.is_whitespace() || c == '>' || c == '/')
-                .map_or(rest.len(), |e| e + 1);
-            let name = &rest[1..name_end];
-            let Some(tag_end) = rest.find('>') else {
-                return Err(invalid(path, name, "unterminated root element"));
-            };
-            if rest[..tag_end].ends_with('/') {
-                return Ok("");
-            }
-            let body = &rest[tag_end + 1..];
-            let close = format!("</{name}");
-            let Some(end) = body.rfind(&close) else {
-                return Err(invalid(path, name, "the root element is not closed"));
-            };
-            return Ok(&body[..end]);
+            return Some(open);
         }
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn includes_are_expanded_without_their_roots() {
-        let dir = std::env::temp_dir().join(format!("crm-include-{}", std::process::id()));
-        std::fs::create_dir_all(dir.join("parts")).expect("dir");
-        std::fs::write(
-            dir.join("parts/chain.xml"),
-            "<?xml version=\"1.0\"?>\n<!-- a part -->\n<mujocoinclude><body name=\"b\"/><include file=\"parts/leaf.xml\"/></mujocoinclude>",
-        )
-        .expect("write");
-        std::fs::write(
-            dir.join("parts/leaf.xml"),
-            "<mujoco model=\"x\"><body name=\"c\"/></mujoco>",
-        )
-        .expect("write");
-        let main = "<mujoco><worldbody><include file=\"parts/chain.xml\"/></worldbody></mujoco>";
-        let expanded = expand_includes(main, &dir.join("main.xml"), &dir, 0).expect("expanded");
-        assert_eq!(
-            expanded,
-            "<mujoco><worldbody><body name=\"b\"/><body name=\"c\"/></worldbody></mujoco>"
-        );
-        let missing = "<mujoco><include file=\"nowhere.xml\"/></mujoco>";
-        let err = expand_includes(missing, &dir.join("main.xml"), &dir, 0).expect_err("missing");
-        assert!(err.to_string().contains("nowhere.xml"), "{err}");
-        std::fs::remove_dir_all(dir).ok();
+/// The text between the root element's start and end tags.
+fn root_children<'a>(text: &'a str, path: &Path) -> Result<&'a str> {
+    let Some(open) = root_start(text) else {
+        return Err(invalid(path, "mujoco", "no root element"));
+    };
+    let rest = &text[open..];
+    let name = root_name(text).unwrap_or("mujoco");
+    let Some(tag_end) = rest.find('>') else {
+        return Err(invalid(path, name, "unterminated root element"));
+    };
+    if rest[..tag_end].ends_with('/') {
+        return Ok("");
     }
+    let body = &rest[tag_end + 1..];
+    let close = format!("</{name}");
+    let Some(end) = body.rfind(&close) else {
+        return Err(invalid(path, name, "the root element is not closed"));
+    };
+    Ok(&body[..end])
 }
+
+#[cfg(test)]
+mod tests;

@@ -10,9 +10,13 @@
 
 pub mod builtin;
 pub mod description;
+pub mod draft;
 mod finger;
 mod includes;
+mod meshes;
 pub mod model;
+mod names;
+mod numbers;
 pub mod profile;
 
 use std::sync::Arc;

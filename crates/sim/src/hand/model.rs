@@ -8,7 +8,8 @@ use rapier3d::prelude::*;
 
 use super::description::{Description, JointKind, Source};
 pub use super::finger::FingerModel;
-use super::finger::finger_model;
+use super::finger::{beyond_limits, finger_model};
+use super::names::did_you_mean;
 use super::profile::{Motor, Profile, Wrist};
 use crate::benchmark::{FINGERS, FingerShape, Topology};
 use crate::error::{Error, Result};
@@ -91,7 +92,14 @@ impl HandModel {
         let palm = description.link(&profile.palm).ok_or_else(|| {
             invalid(
                 "palm".into(),
-                format!("the description has no link {:?}", profile.palm),
+                format!(
+                    "the description has no link {:?}{}",
+                    profile.palm,
+                    did_you_mean(
+                        &profile.palm,
+                        description.links.iter().map(|l| l.name.as_str())
+                    )
+                ),
             )
         })?;
         // The palm's subtree, depth first in the description's order; joint k holds link
@@ -114,6 +122,7 @@ impl HandModel {
             })
             .collect();
         let link_index = |name: &str| links.iter().position(|l| l.name == name);
+        let link_names: Vec<String> = links.iter().map(|l| l.name.clone()).collect();
         let position = |l: usize| order.iter().position(|&o| o == l).unwrap_or(0);
         let joints: Vec<ModelJoint> = joints_in
             .iter()
@@ -199,6 +208,10 @@ impl HandModel {
         let mut commanded = Vec::new();
         for (f, finger) in profile.fingers.all().into_iter().enumerate() {
             let at = format!("fingers.{}", FINGERS[f]);
+            let Some(finger) = finger else {
+                fingers.push(FingerModel::absent());
+                continue;
+            };
             fingers.push(finger_model(
                 f,
                 finger,
@@ -206,13 +219,21 @@ impl HandModel {
                 description,
                 &mut model_joints,
                 &link_index,
+                &link_names,
                 &invalid,
             )?);
             commanded.extend(fingers[f].coupled.iter().map(|c| c.0));
             if joint_index(&model_joints, &finger.command).is_none() {
                 return Err(invalid(
                     format!("{at}.command"),
-                    format!("the hand has no joint {:?} below the palm", finger.command),
+                    format!(
+                        "the hand has no joint {:?} below the palm{}",
+                        finger.command,
+                        did_you_mean(
+                            &finger.command,
+                            model_joints.iter().map(|j| j.name.as_str())
+                        )
+                    ),
                 ));
             }
         }
@@ -225,19 +246,32 @@ impl HandModel {
             let link = link_index(name).ok_or_else(|| {
                 invalid(
                     format!("palm_links[{k}]"),
-                    format!("the hand has no link {name:?}"),
+                    format!(
+                        "the hand has no link {name:?}{}",
+                        did_you_mean(name, link_names.iter().map(String::as_str))
+                    ),
                 )
             })?;
             palm_links.push(link);
         }
 
         let finger_index = |name: &str, at: &str| {
-            FINGERS.iter().position(|f| *f == name).ok_or_else(|| {
+            let f = FINGERS.iter().position(|f| *f == name).ok_or_else(|| {
                 invalid(
                     at.to_string(),
                     format!("unknown finger {name:?}; one of {FINGERS:?}"),
                 )
-            })
+            })?;
+            if !fingers[f].present {
+                return Err(invalid(
+                    at.to_string(),
+                    format!(
+                        "the hand has no {name} finger (the profile's `fingers` leaves it out); \
+                         a topology of this hand uses only the fingers it has"
+                    ),
+                ));
+            }
+            Ok(f)
         };
         // A command by finger name at `at`: the finger, if the value is within its range.
         let command = |name: &str, value: f32, at: &str| {
@@ -302,7 +336,10 @@ impl HandModel {
                     let Some(j) = joint_index(&model_joints, name) else {
                         return Err(invalid(
                             format!("{field}.{name}"),
-                            format!("the hand has no joint {name:?} below the palm"),
+                            format!(
+                                "the hand has no joint {name:?} below the palm{}",
+                                did_you_mean(name, model_joints.iter().map(|j| j.name.as_str()))
+                            ),
                         ));
                     };
                     let Some(entry) = angles.iter_mut().find(|(k, _)| *k == j) else {
@@ -313,6 +350,12 @@ impl HandModel {
                     };
                     if !value.is_finite() {
                         return Err(invalid(format!("{field}.{name}"), "must be finite".into()));
+                    }
+                    if let Some(message) = beyond_limits(&model_joints[j], value) {
+                        return Err(invalid(
+                            format!("{field}.{name}"),
+                            format!("{value} is {message}"),
+                        ));
                     }
                     entry.1 = value;
                 }

@@ -67,6 +67,16 @@ pub struct Wrist {
     pub max_force: f32,
 }
 
+impl Wrist {
+    /// The built-in hand's wrist (`worlds/crm/hand.json`), the default of drafted and imported
+    /// hands.
+    pub const BUILTIN: Wrist = Wrist {
+        stiffness: 2500.0,
+        damping: 80.0,
+        max_force: 50.0,
+    };
+}
+
 /// Position motors on every hand joint.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -83,25 +93,42 @@ pub struct Motor {
     pub armature: Option<f32>,
 }
 
-/// The paper's five finger actions, thumb first.
+impl Motor {
+    /// The built-in hand's motors (`worlds/crm/hand.json`), the default of drafted hands.
+    pub const BUILTIN: Motor = Motor {
+        stiffness: 3.0,
+        damping: 0.06,
+        torque: 0.2,
+        armature: None,
+    };
+}
+
+/// The paper's five finger actions, thumb first. A four-finger hand (Allegro, LEAP) leaves
+/// one of `middle`, `ring` and `little` out: its action dimension stays in the paper's
+/// 8-dimensional action space, masked in every stage ([`crate::World::machine`]), and no
+/// topology may use it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Fingers {
     pub thumb: Finger,
     pub index: Finger,
-    pub middle: Finger,
-    pub ring: Finger,
-    pub little: Finger,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub middle: Option<Finger>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ring: Option<Finger>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub little: Option<Finger>,
 }
 
 impl Fingers {
-    pub fn all(&self) -> [&Finger; 5] {
+    /// Each finger the hand has, thumb first; `None` where the profile leaves it out.
+    pub fn all(&self) -> [Option<&Finger>; 5] {
         [
-            &self.thumb,
-            &self.index,
-            &self.middle,
-            &self.ring,
-            &self.little,
+            Some(&self.thumb),
+            Some(&self.index),
+            self.middle.as_ref(),
+            self.ring.as_ref(),
+            self.little.as_ref(),
         ]
     }
 }

@@ -435,9 +435,9 @@ fn tipping_objects(world: &World) -> Result<Vec<String>> {
 
 fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
     let text = serde_json::to_string_pretty(value).unwrap_or_default() + "\n";
-    std::fs::write(path, text).map_err(|source| Error::Io {
+    std::fs::write(path, text).map_err(|error| Error::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })
 }
 
@@ -459,9 +459,9 @@ pub fn check_layout(repo: &Path) -> Result<()> {
 /// be empty). Nothing is written unless the whole world loads.
 pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
     check_layout(repo)?;
-    let repo = repo.canonicalize().map_err(|source| Error::Io {
+    let repo = repo.canonicalize().map_err(|error| Error::Io {
         path: repo.display().to_string(),
-        source,
+        error,
     })?;
     let occupied = std::fs::read_dir(out)
         .map(|mut d| d.next().is_some())
@@ -494,9 +494,9 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
         std::process::id()
     ));
     let _ = std::fs::remove_dir_all(&staging);
-    let io = |path: &Path, source| Error::Io {
+    let io = |path: &Path, error| Error::Io {
         path: path.display().to_string(),
-        source,
+        error,
     };
     std::fs::create_dir_all(&staging).map_err(|e| io(&staging, e))?;
     let written = (|| -> Result<World> {

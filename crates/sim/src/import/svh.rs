@@ -232,11 +232,7 @@ pub fn profile(description: &Description) -> Result<Profile, String> {
         // hardly depends on them once fixed and held links are welded (0.506 with the
         // built-in hand's, 0.519 with these, with 0.3 N m, and with 30 N m/rad and 1 N m;
         // docs/WORLDS.md). The authors drive every joint by position at 100,000 N.
-        wrist: Wrist {
-            stiffness: 2500.0,
-            damping: 80.0,
-            max_force: 50.0,
-        },
+        wrist: Wrist::BUILTIN,
         motor: Motor {
             stiffness: 10.0,
             damping: 0.2,
@@ -246,9 +242,9 @@ pub fn profile(description: &Description) -> Result<Profile, String> {
         fingers: Fingers {
             thumb,
             index,
-            middle,
-            ring,
-            little,
+            middle: Some(middle),
+            ring: Some(ring),
+            little: Some(little),
         },
         topologies: shapes,
         // Dualcontrol.applyAction in stage 1: `relax` (Helper.py line 153), PIPs at 0.1.
