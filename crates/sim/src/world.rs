@@ -99,19 +99,29 @@ pub struct World {
     pub benchmark: Arc<Benchmark>,
     pub spec: Option<crm::Spec>,
     pub randomization: Option<Randomization>,
-    /// A hash of what shapes a policy's observation and action: the hand profile, the spec
-    /// and the sensors (never where the files lie).
+    /// A hash of what shapes a policy's observation and action: the hand profile, the spec,
+    /// the sensors and every file of the hand by content (its description, the files that
+    /// includes, its meshes), never where the files lie. Checkpoints record it.
     pub hash: String,
+    /// The hash of the profile, the spec and the sensors alone: what checkpoints recorded
+    /// before the hand's files were in [`World::hash`]. A checkpoint that recorded it is
+    /// accepted where the three match.
+    pub profile_hash: String,
 }
 
 impl World {
     /// The built-in world, `worlds/crm/`, compiled in.
     pub fn builtin() -> Self {
         let benchmark = Benchmark::builtin();
-        let hash = world_hash(
+        let profile_hash = world_hash(
             crate::hand::builtin::PROFILE,
             &spec_text(&crate::spec::grasping_spec()),
             &[],
+        );
+        let mut content = Sha256::new();
+        crate::hand::includes::add_content(
+            &mut content,
+            crate::hand::builtin::DESCRIPTION.as_bytes(),
         );
         Self {
             name: "crm".into(),
@@ -120,7 +130,8 @@ impl World {
             benchmark: Arc::new(benchmark),
             spec: None,
             randomization: None,
-            hash,
+            hash: with_content(&profile_hash, &content.finalize().into()),
+            profile_hash,
         }
     }
 
@@ -248,6 +259,7 @@ impl World {
         without.sort_unstable();
         without.dedup();
         benchmark.sensors_without = without.clone();
+        let profile_hash = world_hash(&canonical(&profile_text), &spec_text, &without);
         if let Some(randomization) = &file.randomization
             && [
                 randomization.position,
@@ -269,7 +281,8 @@ impl World {
             benchmark: Arc::new(benchmark),
             spec,
             randomization: file.randomization,
-            hash: world_hash(&canonical(&profile_text), &spec_text, &without),
+            hash: with_content(&profile_hash, &description.content),
+            profile_hash,
         })
     }
 
@@ -300,6 +313,15 @@ fn canonical(text: &str) -> String {
     serde_json::from_str::<serde_json::Value>(text)
         .map(|v| v.to_string())
         .unwrap_or_else(|_| text.to_string())
+}
+
+/// The world's hash: its profile hash and the hand's files' content.
+fn with_content(profile_hash: &str, content: &[u8; 32]) -> String {
+    let mut hasher = Sha256::new();
+    hasher.update(profile_hash.as_bytes());
+    hasher.update(content);
+    let digest = hasher.finalize();
+    digest.iter().take(8).map(|b| format!("{b:02x}")).collect()
 }
 
 fn world_hash(profile: &str, spec: &str, without: &[usize]) -> String {

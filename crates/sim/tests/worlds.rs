@@ -530,3 +530,28 @@ fn a_world_drafted_from_the_test_hands_description_loads_with_its_profiles_choic
     }
     std::fs::remove_dir_all(root).ok();
 }
+
+/// The world's hash covers the hand's files by content: a changed mesh changes it (the
+/// profile hash, what older checkpoints recorded, stays), a copy of the same files in another
+/// place does not.
+#[test]
+fn the_hash_follows_the_hands_files_by_content_not_by_place() {
+    let root = test_world("hash");
+    let before = load(&root);
+    let mesh = root.join("assets/my_hand/meshes/palm.stl");
+    let bytes = std::fs::read(&mesh).expect("palm mesh");
+    let mut edited = bytes.clone();
+    edited[0] = b'#'; // the STL header: the same shape, other bytes
+    std::fs::write(&mesh, &edited).expect("edit");
+    let after = load(&root);
+    assert_ne!(before.hash, after.hash);
+    assert_eq!(before.profile_hash, after.profile_hash);
+    std::fs::write(&mesh, &bytes).expect("restore");
+
+    let elsewhere = test_world("hash-elsewhere");
+    assert_eq!(load(&elsewhere).hash, before.hash);
+    let builtin = World::builtin();
+    assert_ne!(builtin.hash, builtin.profile_hash);
+    std::fs::remove_dir_all(root).ok();
+    std::fs::remove_dir_all(elsewhere).ok();
+}

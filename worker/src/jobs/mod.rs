@@ -14,21 +14,23 @@ use grasp_sim::benchmark::Topology;
 use grasp_sim::{Benchmark, GraspEnv, TaskChoice};
 
 /// The reward mode each algorithm learns from (paper, section V-A).
-/// Refuses a checkpoint trained in a world whose hand profile, spec or sensors differ from
-/// `world`'s (a checkpoint without a world was trained in the built-in one).
+/// Refuses a checkpoint trained in a world whose hand profile, spec, sensors or hand files
+/// differ from `world`'s (a checkpoint without a world was trained in the built-in one). A
+/// checkpoint that recorded the profile hash alone (written before the hand's files were in
+/// the hash) is held to the profile, the spec and the sensors.
 pub fn check_world(
     header: &crm_learn::checkpoint::CheckpointHeader,
     world: &grasp_sim::World,
     path: &std::path::Path,
 ) -> anyhow::Result<()> {
     static BUILTIN: std::sync::OnceLock<String> = std::sync::OnceLock::new();
-    let builtin = BUILTIN.get_or_init(|| grasp_sim::World::builtin().hash);
+    let builtin = BUILTIN.get_or_init(|| grasp_sim::World::builtin().profile_hash);
     let hash = header.world_hash.as_deref().unwrap_or(builtin);
-    if hash != world.hash {
+    if hash != world.hash && hash != world.profile_hash {
         anyhow::bail!(
             "checkpoint {} was trained in world {:?} (hash {hash}), this is world {:?} (hash {}): \
-             the hand profile, the CRM spec or the sensors differ, so its observations and \
-             actions mean other things here",
+             the hand profile, the CRM spec, the sensors or the hand's files differ, so its \
+             observations and actions mean other things here",
             path.display(),
             header.world.as_deref().unwrap_or("crm"),
             world.name,

@@ -18,12 +18,13 @@ use rapier3d::prelude::*;
 use rapier3d_mjcf::mjcf_rs::Model;
 use rapier3d_mjcf::{MjcfLoaderOptions, MjcfRobot};
 use rapier3d_urdf::{UrdfLoaderOptions, UrdfRobot, urdf_rs};
+use sha2::{Digest, Sha256};
 
-use super::includes::{Expansion, fragment_reason, includers};
+use super::includes::{Expansion, add_content, fragment_reason, includers};
 use super::meshes::resolve as resolve_meshes;
 use super::numbers::{self, Format};
 use crate::assets::Assets;
-use crate::error::{Result, invalid_at as invalid, read_text as read};
+use crate::error::{Error, Result, invalid_at as invalid, read_text as read};
 
 /// Which format a description came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -126,6 +127,9 @@ pub struct Description {
     pub source: Source,
     pub links: Vec<Link>,
     pub joints: Vec<Joint>,
+    /// SHA-256 of every file the description read, by content (its text, its includes', its
+    /// meshes'), in the order read: where the files lie is not in it.
+    pub content: [u8; 32],
 }
 
 impl Description {
@@ -147,7 +151,9 @@ impl Description {
     /// Parses MJCF text; `path` names it in errors, `base` (its folder) and `assets` resolve
     /// its includes and meshes.
     pub fn from_mjcf(text: &str, path: &Path, base: &Path, assets: &Assets) -> Result<Self> {
-        let expanded = Expansion::new(base, assets).expand(text, path, 0)?;
+        let mut expansion = Expansion::new(base, assets);
+        let expanded = expansion.expand(text, path, 0)?;
+        let mut digest = expansion.digest;
         if let Some(reason) = fragment_reason(&expanded) {
             let instead: Vec<String> = includers(path)
                 .iter()
@@ -170,7 +176,7 @@ impl Description {
         };
         let mut model = Model::from_str(&expanded, base)
             .map_err(|err| invalid(path, "mujoco", format!("{err:#}")))?;
-        resolve_meshes(&mut model, base, assets, path)?;
+        resolve_meshes(&mut model, base, assets, path, &mut digest)?;
         let robot = MjcfRobot::from_model(&model, options, base);
         let links = robot
             .bodies
@@ -227,6 +233,7 @@ impl Description {
             source: Source::Mjcf,
             links,
             joints,
+            content: digest.finalize().into(),
         })
     }
 
@@ -234,6 +241,8 @@ impl Description {
     /// or found through `assets`) before `rapier3d-urdf` sees them.
     pub fn from_urdf(text: &str, path: &Path, base: &Path, assets: &Assets) -> Result<Self> {
         numbers::check(text, path, Format::Urdf)?;
+        let mut digest = Sha256::new();
+        add_content(&mut digest, text.as_bytes());
         let mut robot = urdf_rs::read_from_string(text)
             .map_err(|err| invalid(path, "robot", err.to_string()))?;
         for link in &mut robot.links {
@@ -256,6 +265,11 @@ impl Description {
                             ),
                         )
                     })?;
+                    let bytes = std::fs::read(&found).map_err(|error| Error::Io {
+                        path: found.display().to_string(),
+                        error,
+                    })?;
+                    add_content(&mut digest, &bytes);
                     *filename = found.display().to_string();
                 }
             }
@@ -335,6 +349,7 @@ impl Description {
             source: Source::Urdf,
             links,
             joints,
+            content: digest.finalize().into(),
         })
     }
 

@@ -11,6 +11,8 @@
 
 use std::path::{Path, PathBuf};
 
+use sha2::{Digest, Sha256};
+
 use crate::assets::Assets;
 use crate::error::{Result, invalid_at as invalid, read_text as read};
 
@@ -21,6 +23,8 @@ pub struct Expansion<'a> {
     pub assets: &'a Assets,
     /// Every file read, the main one first.
     pub files: Vec<PathBuf>,
+    /// The text of every file read, in order: part of the world's hash.
+    pub digest: Sha256,
 }
 
 impl<'a> Expansion<'a> {
@@ -29,6 +33,7 @@ impl<'a> Expansion<'a> {
             base,
             assets,
             files: Vec::new(),
+            digest: Sha256::new(),
         }
     }
 
@@ -44,6 +49,7 @@ impl<'a> Expansion<'a> {
         }
         super::numbers::check(text, path, super::numbers::Format::Mjcf)?;
         self.files.push(path.to_path_buf());
+        add_content(&mut self.digest, text.as_bytes());
         let mut out = String::with_capacity(text.len());
         let mut rest = text;
         while let Some(start) = find_tag(rest, "include") {
@@ -111,6 +117,12 @@ impl<'a> Expansion<'a> {
             ),
         ))
     }
+}
+
+/// Adds one file's bytes to a content digest, length first, so two files never read as one.
+pub fn add_content(digest: &mut Sha256, bytes: &[u8]) {
+    digest.update((bytes.len() as u64).to_le_bytes());
+    digest.update(bytes);
 }
 
 /// Whether `text`'s root is `<mujocoinclude>` or it declares no `<worldbody>`: a part meant

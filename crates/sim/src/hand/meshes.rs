@@ -4,18 +4,29 @@
 //! check` and lowered the oracle). Here a mesh missing there is looked up in the `CRM_ASSETS`
 //! folders (under `meshdir`, then by its own path) and, when found, the model is pointed at
 //! it; a mesh found nowhere, or in a format the loader cannot read, is an error naming the
-//! mesh, the body and geom that use it (collision or visual) and every place searched.
+//! mesh, the body and geom that use it (collision or visual) and every place searched. Each
+//! mesh file's bytes go into the world's hash.
 
 use std::path::{Path, PathBuf};
 
 use rapier3d_mjcf::mjcf_rs::Model;
 
+use sha2::Sha256;
+
+use super::includes::add_content;
 use crate::assets::Assets;
-use crate::error::{Result, invalid_at as invalid};
+use crate::error::{Error, Result, invalid_at as invalid};
 
 /// Points every mesh of `model` at a file that exists, or fails naming the first that has
-/// none. `base` is the main file's folder; `path` names errors.
-pub fn resolve(model: &mut Model, base: &Path, assets: &Assets, path: &Path) -> Result<()> {
+/// none; adds each mesh file's bytes to `digest`. `base` is the main file's folder; `path`
+/// names errors.
+pub fn resolve(
+    model: &mut Model,
+    base: &Path,
+    assets: &Assets,
+    path: &Path,
+    digest: &mut Sha256,
+) -> Result<()> {
     for k in 0..model.assets.meshes.len() {
         let mesh = &model.assets.meshes[k];
         let Some(file) = mesh.file.clone() else {
@@ -69,6 +80,11 @@ pub fn resolve(model: &mut Model, base: &Path, assets: &Assets, path: &Path) -> 
                 ),
             ));
         }
+        let bytes = std::fs::read(&found).map_err(|error| Error::Io {
+            path: found.display().to_string(),
+            error,
+        })?;
+        add_content(digest, &bytes);
         if searched.first() != Some(&found) {
             let absolute = std::path::absolute(&found).unwrap_or(found);
             model.assets.meshes[k].file = Some(absolute.display().to_string());

@@ -12,7 +12,7 @@ pub mod builtin;
 pub mod description;
 pub mod draft;
 mod finger;
-mod includes;
+pub(crate) mod includes;
 mod meshes;
 pub mod model;
 mod names;
