@@ -36,14 +36,18 @@ fn jobs_name_a_world_that_workers_run_and_checkpoints_keep_to() {
         .iter()
         .filter_map(|w| w["name"].as_str())
         .collect();
-    assert_eq!(names, ["crm", "test-hand"]);
+    // `world4/` is the same world with a four-finger hand.
+    assert_eq!(names, ["crm", "test-hand", "test-hand4"]);
     assert_eq!(listed["worlds"][1]["tasks"], 3);
     let tasks = get(&addr, "/api/v1/tasks?world=test-hand");
     assert_eq!(tasks["tasks"].as_array().map(Vec::len), Some(3));
     let openapi = get(&addr, "/api/v1/openapi.json");
     let world_enum =
         &openapi["components"]["schemas"]["EvalRequest"]["properties"]["world"]["enum"];
-    assert_eq!(world_enum, &serde_json::json!(["crm", "test-hand", null]));
+    assert_eq!(
+        world_enum,
+        &serde_json::json!(["crm", "test-hand", "test-hand4", null])
+    );
     // Every world's task ids name the tasks and the palm shifts a cloning may give.
     let imitation = &openapi["components"]["schemas"]["ImitationSpec"]["properties"];
     let ids: Vec<&str> = tasks["tasks"]
