@@ -409,20 +409,28 @@ fn tokens_guard_workers_and_mutating_calls() {
     );
     let reply = http(&addr, "POST", "/api/v1/jobs", Some(TRAIN), Some("s3cret"));
     assert_eq!(reply.status, 201);
-    // A worker with the wrong token is refused and exits with a message.
-    let out = std::process::Command::new(crm())
-        .args([
-            "worker",
-            "--coordinator",
-            &format!("http://{}", server.grpc),
-            "--token",
-            "wrong",
-        ])
-        .output()
-        .expect("run worker");
-    assert_eq!(out.status.code(), Some(2));
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    // A worker refused at registration exits 2 with the coordinator's reason: a wrong token,
+    // or a name that would read otherwise than it is (a right-to-left override).
+    let refused = |args: &[&str]| {
+        let out = std::process::Command::new(crm())
+            .args([
+                "worker",
+                "--coordinator",
+                &format!("http://{}", server.grpc),
+            ])
+            .args(args)
+            .output()
+            .expect("run worker");
+        assert_eq!(out.status.code(), Some(2));
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let stderr = refused(&["--token", "wrong"]);
     assert!(stderr.contains("refused"), "{stderr}");
+    let stderr = refused(&["--token", "s3cret", "--name", "gpu\u{202E}1"]);
+    assert!(
+        stderr.contains("name") && stderr.contains("bidirectional"),
+        "{stderr}"
+    );
     assert_eq!(
         get(&addr, "/api/v1/workers")["workers"]
             .as_array()
@@ -471,4 +479,69 @@ fn a_job_building_demonstrations_shows_its_phase_and_can_be_cancelled_in_it() {
         r#"{"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 64, "seed": 2, "envs": 1, "config": {"rollout_steps": 64}}"#,
     );
     wait_state(&addr, next["id"].as_i64().expect("id"), "succeeded", 120);
+}
+
+/// Reads what the coordinator sends on `stream` until it closes it (or 8 s pass); returns
+/// the text and whether it closed.
+fn until_closed(stream: &mut std::net::TcpStream) -> (String, bool) {
+    use std::io::Read;
+    stream
+        .set_read_timeout(Some(std::time::Duration::from_secs(8)))
+        .expect("timeout");
+    let mut text = Vec::new();
+    let mut buf = [0u8; 1024];
+    loop {
+        match stream.read(&mut buf) {
+            Ok(0) => return (String::from_utf8_lossy(&text).into_owned(), true),
+            Ok(n) => text.extend(&buf[..n]),
+            Err(err) if err.kind() == std::io::ErrorKind::ConnectionReset => {
+                return (String::from_utf8_lossy(&text).into_owned(), true);
+            }
+            Err(_) => return (String::from_utf8_lossy(&text).into_owned(), false),
+        }
+    }
+}
+
+/// Connections are bounded in time and number: a request whose headers never end, and a
+/// connection that sends nothing (REST or gRPC), are closed after their timeouts; one beyond the cap is
+/// answered 503 with `Retry-After` and closed, and the coordinator answers again once the
+/// others are gone.
+#[test]
+fn connections_are_bounded_in_time_and_number() {
+    use std::io::Write;
+    use std::net::TcpStream;
+    let data = TempDir::new("hygiene");
+    let server = start_server(
+        &data.0,
+        &[
+            "--max-connections",
+            "3",
+            "--header-timeout-s",
+            "1",
+            "--idle-timeout-s",
+            "2",
+        ],
+    );
+    let addr = server.http.clone();
+    let started = std::time::Instant::now();
+    let mut slow = TcpStream::connect(&addr).expect("connect");
+    slow.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+        .expect("half a request");
+    let mut silent = TcpStream::connect(&addr).expect("connect");
+    let mut third = TcpStream::connect(&addr).expect("connect");
+    // A gRPC connection that sends nothing is closed when idle too.
+    let mut grpc_silent = TcpStream::connect(&server.grpc).expect("connect");
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    let mut beyond = TcpStream::connect(&addr).expect("connect");
+    let (reply, closed) = until_closed(&mut beyond);
+    assert!(closed, "{reply}");
+    assert!(reply.starts_with("HTTP/1.1 503"), "{reply}");
+    assert!(reply.to_lowercase().contains("retry-after: 1"), "{reply}");
+    assert!(reply.contains("\"field\":\"connection\""), "{reply}");
+    for stream in [&mut slow, &mut silent, &mut third, &mut grpc_silent] {
+        let (_, closed) = until_closed(stream);
+        assert!(closed, "a stalled connection stays open");
+    }
+    assert!(started.elapsed() < std::time::Duration::from_secs(6));
+    assert_eq!(get(&addr, "/healthz")["status"], "ok");
 }

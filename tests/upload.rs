@@ -114,7 +114,7 @@ fn checkpoints_made_elsewhere_are_stored_once_checked_and_evaluated_remotely() {
     assert_eq!(before.len(), 1);
 
     // Refused bodies store nothing and say why.
-    let refusals: [Refusal; 6] = [
+    let refusals: [Refusal; 7] = [
         (
             "/api/v1/checkpoints",
             model.clone(),
@@ -145,6 +145,14 @@ fn checkpoints_made_elsewhere_are_stored_once_checked_and_evaluated_remotely() {
         ),
         (
             "/api/v1/checkpoints?name=",
+            model.clone(),
+            Some(TOKEN),
+            400,
+            "name",
+        ),
+        (
+            // A right-to-left override would make the name read otherwise than it is.
+            "/api/v1/checkpoints?name=policy%E2%80%AEtxt.exe",
             model.clone(),
             Some(TOKEN),
             400,

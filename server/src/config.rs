@@ -19,7 +19,7 @@ pub struct ServerConfig {
     #[arg(long, default_value = "data")]
     pub data_dir: PathBuf,
     /// Bearer token required from workers and for mutating REST calls.
-    #[arg(long, env = "CRM_TOKEN")]
+    #[arg(long, env = "CRM_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
     /// Seconds a lease lives without a heartbeat before the job is re-queued.
     #[arg(long, default_value_t = 30)]
@@ -33,6 +33,19 @@ pub struct ServerConfig {
     /// REST requests served at once.
     #[arg(long, default_value_t = 256)]
     pub max_concurrent_requests: usize,
+    /// Open REST connections; one beyond is answered 503 with `Retry-After` and closed.
+    /// Default 512: twice the requests served at once, far under the descriptors a process
+    /// gets (1,024 at the least), so accepting never fails for want of them.
+    #[arg(long, default_value_t = 512)]
+    pub max_connections: usize,
+    /// Seconds a REST client has to send a request's headers. Default 10 (nginx's
+    /// `client_header_timeout` is 60; a browser sends its headers at once).
+    #[arg(long, default_value_t = 10)]
+    pub header_timeout_s: u32,
+    /// Seconds a REST connection may read and write nothing before it is closed. Default 60
+    /// (nginx's `keepalive_timeout` is 75); an event stream writes a keep-alive every 15 s.
+    #[arg(long, default_value_t = 60)]
+    pub idle_timeout_s: u32,
     /// Largest checkpoint a worker may upload, bytes.
     #[arg(long, default_value_t = 256 * 1024 * 1024)]
     pub max_checkpoint_bytes: u64,
@@ -70,6 +83,9 @@ impl Default for ServerConfig {
             heartbeat_interval_s: 5,
             max_body_bytes: 256 * 1024,
             max_concurrent_requests: 256,
+            max_connections: 512,
+            header_timeout_s: 10,
+            idle_timeout_s: 60,
             max_checkpoint_bytes: 256 * 1024 * 1024,
             max_recording_bytes: 1024 * 1024 * 1024,
             episodes_kept: 200,

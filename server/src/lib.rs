@@ -8,6 +8,7 @@ pub mod api;
 pub mod charts;
 pub mod config;
 pub mod grpc;
+pub mod listen;
 pub mod store;
 pub mod uploads;
 pub mod web;
@@ -118,21 +119,23 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
 
     let router = api::router(state.clone());
     let stop = shutdown.clone();
+    let limits = listen::Limits {
+        max_connections: config.max_connections.max(1),
+        header_timeout: std::time::Duration::from_secs(config.header_timeout_s.max(1).into()),
+        idle_timeout: std::time::Duration::from_secs(config.idle_timeout_s.max(1).into()),
+    };
     let http_task = tokio::spawn(async move {
-        axum::serve(http, router)
-            .with_graceful_shutdown(async move { stop.notified().await })
-            .await
-            .context("HTTP server")
+        listen::serve(http, router, limits, async move { stop.notified().await }).await;
+        anyhow::Ok(())
     });
     let stop = shutdown.clone();
     let service = grpc::service(state.clone());
     let grpc_task = tokio::spawn(async move {
         tonic::transport::Server::builder()
             .add_service(service)
-            .serve_with_incoming_shutdown(
-                tokio_stream::wrappers::TcpListenerStream::new(grpc),
-                async move { stop.notified().await },
-            )
+            .serve_with_incoming_shutdown(listen::grpc_incoming(grpc, limits), async move {
+                stop.notified().await
+            })
             .await
             .context("gRPC server")
     });

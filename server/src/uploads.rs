@@ -34,22 +34,9 @@ pub fn hex(digest: &[u8]) -> String {
     digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// The longest upload label, in characters.
-pub const MAX_NAME: usize = 128;
-
-/// Checks an upload's label: 1 to [`MAX_NAME`] characters, none of them a control character
-/// (the OpenAPI document's pattern).
+/// Checks an upload's label ([`crm_api::check_name`]).
 pub fn check_name(name: &str) -> Result<(), UploadError> {
-    if name.is_empty() {
-        return Err(UploadError::Name("must not be empty"));
-    }
-    if name.chars().count() > MAX_NAME {
-        return Err(UploadError::Name("at most 128 characters"));
-    }
-    if name.chars().any(char::is_control) {
-        return Err(UploadError::Name("no control characters"));
-    }
-    Ok(())
+    crm_api::check_name(name).map_err(UploadError::Name)
 }
 
 /// Validates `bytes` as a checkpoint and stores it (or finds the same bytes already

@@ -116,11 +116,12 @@ pub fn inspect(prefix: &[u8], file_len: u64) -> Result<CheckpointInfo, Checkpoin
         }
         data_len = data_len.max(stop);
     }
-    if end + data_len != file_len {
+    let needed = end
+        .checked_add(data_len)
+        .ok_or_else(|| bad("tensor offsets beyond 2^64 bytes"))?;
+    if needed != file_len {
         return Err(bad(&format!(
-            "the tensors need {} bytes, the file has {}",
-            end + data_len,
-            file_len
+            "the tensors need {needed} bytes, the file has {file_len}"
         )));
     }
     let header = metadata
@@ -134,6 +135,13 @@ pub fn inspect(prefix: &[u8], file_len: u64) -> Result<CheckpointInfo, Checkpoin
         return Err(CheckpointError::Format {
             found: header.format,
         });
+    }
+    if i64::try_from(header.steps).is_err() {
+        // Stores keep steps as SQL integers (i64).
+        return Err(CheckpointError::Header(format!(
+            "steps: {} is beyond 2^63 - 1",
+            header.steps
+        )));
     }
     let algorithm = Algorithm::parse(&header.algorithm)
         .ok_or_else(|| CheckpointError::Algorithm(header.algorithm.clone()))?;
@@ -216,5 +224,24 @@ mod tests {
         let mut huge = vec![0xff; 8];
         huge.extend([0u8; 8]);
         assert_eq!(header_len(&huge), None);
+        let endless = {
+            let json = serde_json::json!({
+                "w": {"dtype": "F32", "shape": [1], "data_offsets": [0, u64::MAX]},
+            })
+            .to_string();
+            let mut bytes = (json.len() as u64).to_le_bytes().to_vec();
+            bytes.extend(json.as_bytes());
+            bytes
+        };
+        let err = inspect(&endless, endless.len() as u64).expect_err("offsets past 2^64");
+        assert!(err.to_string().contains("beyond 2^64"), "{err}");
+        let steps = serde_json::json!({
+            "format": FORMAT, "algorithm": "crm-ppo", "env_version": ENV_VERSION,
+            "spec_hash": "abc", "seed": 3, "steps": u64::MAX,
+        })
+        .to_string();
+        let far = file(Some(&steps));
+        let err = inspect(&far, far.len() as u64).expect_err("steps beyond i64");
+        assert!(err.to_string().contains("2^63"), "{err}");
     }
 }

@@ -9,6 +9,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod imitation;
 pub mod jobs;
+pub mod names;
 pub mod record;
 pub mod worlds;
 
@@ -17,4 +18,5 @@ pub use checkpoint::{CheckpointError, CheckpointInfo};
 pub use config::{ConfigError, LrSchedule, PpoConfig, SacConfig};
 pub use imitation::{ImitationSpec, parse_shift};
 pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, ObjectiveMode, Row, TrainSpec};
+pub use names::check_name;
 pub use record::RecordSpec;

@@ -38,9 +38,6 @@ const AXES: [&str; 13] = [
     "start_log_std",
 ];
 
-/// The longest sweep name, in characters.
-const MAX_NAME: usize = 128;
-
 /// `base` with the axis values of one grid point set (`config.KEY` inside `config`).
 fn point(base: &Map<String, Value>, values: &[(&str, &Value)]) -> Value {
     let mut spec = base.clone();
@@ -93,7 +90,10 @@ async fn plan(state: &AppState, body: Value) -> Result<Plan, ApiError> {
         return Err(ApiError::invalid("body", "expected a JSON object"));
     };
     let name = match fields.remove("name") {
-        Some(Value::String(name)) if !name.is_empty() && name.chars().count() <= MAX_NAME => name,
+        Some(Value::String(name)) => {
+            crm_api::check_name(&name).map_err(|why| ApiError::invalid("name", why))?;
+            name
+        }
         None => "sweep".to_string(),
         Some(_) => return Err(ApiError::invalid("name", "a string of 1 to 128 characters")),
     };

@@ -40,7 +40,8 @@ impl tonic::service::Interceptor for TokenCheck {
                 .get("authorization")
                 .and_then(|v| v.to_str().ok())
                 .and_then(|v| v.strip_prefix("Bearer "));
-            if given != Some(&**token) {
+            if !given.is_some_and(|g| crate::api::constant_time_eq(g.as_bytes(), token.as_bytes()))
+            {
                 return Err(Status::unauthenticated("missing or wrong bearer token"));
             }
         }
@@ -100,9 +101,8 @@ impl Coordinator for CoordinatorService {
         request: Request<pb::RegisterRequest>,
     ) -> Result<Response<pb::RegisterReply>, Status> {
         let r = request.into_inner();
-        if r.name.is_empty() || r.name.len() > 200 {
-            return Err(Status::invalid_argument("name: 1 to 200 characters"));
-        }
+        crm_api::check_name(&r.name)
+            .map_err(|why| Status::invalid_argument(format!("name: {why}")))?;
         let worker = self
             .state
             .store
@@ -194,6 +194,11 @@ impl Coordinator for CoordinatorService {
                 Some(progress::Body::IterationJson(json)) => {
                     let it: crm_api::Iteration = serde_json::from_str(&json)
                         .map_err(|e| Status::invalid_argument(format!("iteration_json: {e}")))?;
+                    if i64::try_from(it.steps).is_err() || i64::try_from(it.iteration).is_err() {
+                        return Err(Status::invalid_argument(
+                            "iteration_json: steps and iteration must be below 2^63",
+                        ));
+                    }
                     let fraction = (it.steps as f64 / budget.max(1) as f64).min(1.0);
                     store
                         .add_metric(key.1, &it, fraction)
@@ -263,6 +268,9 @@ impl Coordinator for CoordinatorService {
                 "meta.algorithm: unknown algorithm",
             ));
         }
+        let Ok(steps) = i64::try_from(meta.steps) else {
+            return Err(Status::invalid_argument("meta.steps: must be below 2^63"));
+        };
         let max = self.state.config.max_checkpoint_bytes;
         if meta.size > max {
             return Err(Status::invalid_argument(format!(
@@ -344,7 +352,7 @@ impl Coordinator for CoordinatorService {
             .add_checkpoint(&NewCheckpoint {
                 job: Some(meta.job_id),
                 algorithm: &meta.algorithm,
-                steps: meta.steps as i64,
+                steps,
                 size: written as i64,
                 file: &name,
                 sha256: &sha256,

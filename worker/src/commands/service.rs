@@ -70,7 +70,7 @@ pub struct WorkerArgs {
     #[arg(long, default_value = "http://127.0.0.1:50051")]
     pub coordinator: String,
     /// The coordinator's bearer token.
-    #[arg(long, env = "CRM_TOKEN")]
+    #[arg(long, env = "CRM_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
     /// A folder of world folders (each with a `world.json`) this worker can run besides the
     /// built-in world: the coordinator's `--worlds`, as this machine sees it.

@@ -58,7 +58,13 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
             .await
         {
             Ok(reply) => reply.into_inner(),
-            Err(status) if status.code() == tonic::Code::Unauthenticated => {
+            // A wrong token or a name the coordinator refuses will not change on a retry.
+            Err(status)
+                if matches!(
+                    status.code(),
+                    tonic::Code::Unauthenticated | tonic::Code::InvalidArgument
+                ) =>
+            {
                 anyhow::bail!("the coordinator refused this worker: {}", status.message());
             }
             Err(status) => {
