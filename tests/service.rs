@@ -409,6 +409,8 @@ fn tokens_guard_workers_and_mutating_calls() {
     );
     let reply = http(&addr, "POST", "/api/v1/jobs", Some(TRAIN), Some("s3cret"));
     assert_eq!(reply.status, 201);
+    // HEAD is a read, as GET is.
+    assert_eq!(http(&addr, "HEAD", "/api/v1/jobs", None, None).status, 200);
     // A worker refused at registration exits 2 with the coordinator's reason: a wrong token,
     // or a name that would read otherwise than it is (a right-to-left override).
     let refused = |args: &[&str]| {
@@ -544,4 +546,34 @@ fn connections_are_bounded_in_time_and_number() {
     }
     assert!(started.elapsed() < std::time::Duration::from_secs(6));
     assert_eq!(get(&addr, "/healthz")["status"], "ok");
+}
+
+/// Event streams are capped: with `--max-event-streams 1` a second stream is answered 503 with
+/// `Retry-After`, naming `events`, while the first stays open.
+#[test]
+fn event_streams_beyond_the_cap_are_answered_503() {
+    use std::io::{Read, Write};
+    let data = TempDir::new("streams");
+    let server = start_server(&data.0, &["--max-event-streams", "1"]);
+    let addr = server.http.clone();
+    let mut first = std::net::TcpStream::connect(&addr).expect("connect");
+    write!(first, "GET /api/v1/events HTTP/1.1\r\nHost: {addr}\r\n\r\n").expect("request");
+    first
+        .set_read_timeout(Some(std::time::Duration::from_secs(10)))
+        .expect("timeout");
+    let mut head = Vec::new();
+    let mut byte = [0u8; 1];
+    while !head.ends_with(b"\r\n\r\n") {
+        first
+            .read_exact(&mut byte)
+            .expect("the first stream's head");
+        head.push(byte[0]);
+    }
+    let head = String::from_utf8_lossy(&head);
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    let second = http(&addr, "GET", "/api/v1/events", None, None);
+    assert_eq!(second.status, 503);
+    assert_eq!(second.header("retry-after").as_deref(), Some("5"));
+    assert_eq!(second.json()["error"]["field"], "events");
+    drop(first);
 }

@@ -38,6 +38,10 @@ pub struct ServerConfig {
     /// gets (1,024 at the least), so accepting never fails for want of them.
     #[arg(long, default_value_t = 512)]
     pub max_connections: usize,
+    /// Event streams (`GET /api/v1/events`) open at once; one beyond is answered 503 with
+    /// `Retry-After`. Default 64: a page holds one, so 64 browser tabs.
+    #[arg(long, default_value_t = 64)]
+    pub max_event_streams: usize,
     /// Seconds a REST client has to send a request's headers. Default 10 (nginx's
     /// `client_header_timeout` is 60; a browser sends its headers at once).
     #[arg(long, default_value_t = 10)]
@@ -84,6 +88,7 @@ impl Default for ServerConfig {
             max_body_bytes: 256 * 1024,
             max_concurrent_requests: 256,
             max_connections: 512,
+            max_event_streams: 64,
             header_timeout_s: 10,
             idle_timeout_s: 60,
             max_checkpoint_bytes: 256 * 1024 * 1024,

@@ -33,6 +33,8 @@ pub struct AppState {
     /// A counter bumped when a job is queued, changes state or reports progress; live pages
     /// follow it through `GET /api/v1/events`. [`SHUTDOWN`] ends their streams.
     pub events: tokio::sync::watch::Sender<u64>,
+    /// Places for open event streams (`--max-event-streams`).
+    pub event_streams: Arc<tokio::sync::Semaphore>,
 }
 
 /// The `events` value that tells live streams the coordinator is stopping.
@@ -98,6 +100,7 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
         worlds,
         config: config.clone(),
         events: tokio::sync::watch::channel(0).0,
+        event_streams: Arc::new(tokio::sync::Semaphore::new(config.max_event_streams.max(1))),
     });
     if state.store.created() && config.models.is_dir() {
         let n = uploads::register_dir(&state, &config.models)

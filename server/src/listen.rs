@@ -37,8 +37,7 @@ pub struct Limits {
 }
 
 /// The answer to a connection beyond the cap.
-const BUSY: &str =
-    "{\"error\":{\"field\":\"connection\",\"message\":\"too many open connections; retry later\"}}";
+const BUSY: &str = "{\"error\":{\"code\":\"unavailable\",\"field\":\"connection\",\"message\":\"too many open connections; retry later\"}}";
 
 /// Serves `router` on `listener` until `stop` completes.
 pub async fn serve(

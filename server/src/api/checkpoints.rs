@@ -67,11 +67,12 @@ pub async fn get(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> 
 
 pub async fn download(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
     let row = stored(&state, &id).await?;
-    // Checkpoints are small (about a megabyte): read whole.
-    let bytes = tokio::fs::read(state.store.checkpoint_path(&row))
+    // Streamed from disk: a client that stops reading holds one buffer, and its connection
+    // is closed once idle (`listen.rs`).
+    let file = tokio::fs::File::open(state.store.checkpoint_path(&row))
         .await
         .map_err(ApiError::internal)?;
-    let body = Body::from(bytes);
+    let body = Body::from_stream(tokio_util::io::ReaderStream::new(file));
     let name = match (row.job_id, &row.name) {
         (Some(job), _) => format!("{}-job{job}-{}.safetensors", row.algorithm, row.steps),
         (None, Some(name)) => format!("{}.safetensors", file_safe(name)),

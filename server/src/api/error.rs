@@ -52,6 +52,16 @@ impl ApiError {
         }
     }
 
+    /// 503: the coordinator is at a limit of its own; `field` names what.
+    pub fn unavailable(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self {
+            status: StatusCode::SERVICE_UNAVAILABLE,
+            code: "unavailable",
+            message: message.into(),
+            field: Some(field.into()),
+        }
+    }
+
     pub fn unauthorized() -> Self {
         Self {
             status: StatusCode::UNAUTHORIZED,

@@ -195,7 +195,7 @@ async fn not_found() -> ApiError {
     ApiError::not_found("route", "no such API route")
 }
 
-/// Mutating calls need the bearer token when one is configured.
+/// Mutating calls need the bearer token when one is configured; `HEAD` is a read, as `GET`.
 async fn require_token(
     State(state): State<Arc<AppState>>,
     headers: HeaderMap,
@@ -203,6 +203,7 @@ async fn require_token(
     next: Next,
 ) -> Response {
     if request.method() != Method::GET
+        && request.method() != Method::HEAD
         && let Some(token) = &state.config.token
         && !bearer_matches(&headers, token)
     {
