@@ -106,3 +106,30 @@ async fn a_checkpoint_a_queued_job_fine_tunes_from_is_kept_and_its_run_stays() {
     store.close().await;
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A worker holds one lease at a time: asking again while its job runs gets nothing, and the
+/// next job goes to it once the first is no longer running.
+#[tokio::test]
+async fn a_worker_holds_one_lease_at_a_time() {
+    let dir = temp_dir("one-lease");
+    let store = Store::open(&dir).await.expect("open");
+    let worker = store
+        .register_worker("w", 2, "test")
+        .await
+        .expect("worker")
+        .id;
+    let other = store
+        .register_worker("v", 2, "test")
+        .await
+        .expect("worker")
+        .id;
+    let first = store.create_job(new_job("{}")).await.expect("job").id;
+    let second = store.create_job(new_job("{}")).await.expect("job").id;
+    let leased = store.lease(&worker, 60_000).await.expect("lease");
+    assert_eq!(leased.map(|j| j.id), Some(first));
+    assert!(store.lease(&worker, 60_000).await.expect("lease").is_none());
+    let leased = store.lease(&other, 60_000).await.expect("lease");
+    assert_eq!(leased.map(|j| j.id), Some(second));
+    store.close().await;
+    std::fs::remove_dir_all(&dir).ok();
+}
