@@ -194,5 +194,23 @@ fn a_nan_attribute_in_an_included_part_is_refused_naming_file_element_and_attrib
             "{err}"
         );
     }
+    std::fs::write(&body, BODY).expect("restore");
+    let parts = root.join("package/hand/assets.xml");
+    std::fs::write(
+        &parts,
+        ASSETS.replacen(
+            "file=\"skin.stl\"",
+            "file=\"skin.stl\" scale=\"1 inf 1\"",
+            1,
+        ),
+    )
+    .expect("edit");
+    let err = Description::load(&scene, &Assets::default())
+        .expect_err("a bad number in a part of two elements")
+        .to_string();
+    assert!(
+        err.contains("assets.xml") && err.contains("line 5") && err.contains("\"scale\""),
+        "{err}"
+    );
     std::fs::remove_dir_all(root).ok();
 }

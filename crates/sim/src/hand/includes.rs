@@ -47,7 +47,11 @@ impl<'a> Expansion<'a> {
                 "includes nest deeper than 16 files",
             ));
         }
-        super::numbers::check(text, path, super::numbers::Format::Mjcf)?;
+        if depth == 0 {
+            // An included file is checked whole where it is read (below), so its line numbers
+            // are its own and a part with several top-level elements is still one document.
+            super::numbers::check(text, path, super::numbers::Format::Mjcf)?;
+        }
         self.files.push(path.to_path_buf());
         add_content(&mut self.digest, text.as_bytes());
         let mut out = String::with_capacity(text.len());
@@ -62,6 +66,7 @@ impl<'a> Expansion<'a> {
                 .ok_or_else(|| invalid(path, "include", "an <include> without a file attribute"))?;
             let included = self.find(&file, path)?;
             let inner = read(&included)?;
+            super::numbers::check(&inner, &included, super::numbers::Format::Mjcf)?;
             let children = root_children(&inner, &included)?;
             out.push_str(&self.expand(children, &included, depth + 1)?);
             rest = &rest[start + len + 1..];
