@@ -56,7 +56,9 @@ pub fn init_world(
     };
     let world = serde_json::json!({ "name": name, "hand": "hand.json" });
     let profile = serde_json::to_string_pretty(&drafted.profile).unwrap_or_default();
-    let staging: PathBuf = out.with_extension("init-draft");
+    // A hidden sibling no user folder is named like, moved into place once the draft loads.
+    let leaf = out.file_name().and_then(|n| n.to_str()).unwrap_or("world");
+    let staging: PathBuf = out.with_file_name(format!(".{leaf}.crm-init-{}", std::process::id()));
     let write = |path: PathBuf, text: String| {
         std::fs::write(&path, text + "\n").map_err(|error| Error::Io {
             path: path.display().to_string(),
