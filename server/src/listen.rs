@@ -51,32 +51,26 @@ pub async fn serve(
     let mut stop = std::pin::pin!(stop);
     loop {
         let stream = tokio::select! {
-            accepted = listener.accept() => match accepted {
-                Ok((stream, _)) => stream,
-                Err(err) => {
-                    tracing::warn!(%err, "accept failed; retrying");
-                    tokio::time::sleep(Duration::from_millis(50)).await;
-                    continue;
-                }
-            },
+            stream = accept(&listener) => stream,
             () = &mut stop => break,
         };
-        let Ok(permit) = permits.clone().try_acquire_owned() else {
-            tokio::spawn(refuse(stream));
-            continue;
+        let guarded = match Guarded::new(stream, &permits, limits.idle_timeout) {
+            Ok(guarded) => guarded,
+            Err(stream) => {
+                tokio::spawn(refuse(stream));
+                continue;
+            }
         };
         let service = TowerToHyperService::new(router.clone());
         let mut closing = closing.clone();
         tokio::spawn(async move {
-            let _permit = permit;
-            let io = TokioIo::new(Idle::new(stream, limits.idle_timeout));
             let mut builder = Builder::new(TokioExecutor::new());
             builder
                 .http1()
                 .timer(TokioTimer::new())
                 .header_read_timeout(limits.header_timeout);
             builder.http2().timer(TokioTimer::new());
-            let conn = builder.serve_connection_with_upgrades(io, service);
+            let conn = builder.serve_connection_with_upgrades(TokioIo::new(guarded), service);
             let mut conn = std::pin::pin!(conn);
             // `is_ok` lets go of the watch's read guard before the select's output holds it.
             let shutdown = async { closing.wait_for(|c| *c).await.is_ok() };
@@ -96,7 +90,7 @@ pub async fn serve(
 }
 
 /// The gRPC listener's connections: at most `max_connections` open (one beyond is closed at
-/// once), each closed after `idle_timeout` of silence; accept errors are logged and retried.
+/// once), each closed after `idle_timeout` of silence.
 pub fn grpc_incoming(
     listener: TcpListener,
     limits: Limits,
@@ -105,21 +99,10 @@ pub fn grpc_incoming(
     let permits = Arc::new(Semaphore::new(limits.max_connections));
     tokio::spawn(async move {
         loop {
-            let stream = match listener.accept().await {
-                Ok((stream, _)) => stream,
-                Err(err) => {
-                    tracing::warn!(%err, "gRPC accept failed; retrying");
-                    tokio::time::sleep(Duration::from_millis(50)).await;
-                    continue;
-                }
-            };
-            let Ok(permit) = permits.clone().try_acquire_owned() else {
+            let stream = accept(&listener).await;
+            let Ok(guarded) = Guarded::new(stream, &permits, limits.idle_timeout) else {
                 tracing::warn!("too many gRPC connections; one closed");
                 continue;
-            };
-            let guarded = Guarded {
-                io: Idle::new(stream, limits.idle_timeout),
-                _permit: permit,
             };
             if send.send(Ok(guarded)).await.is_err() {
                 return; // the server stopped
@@ -129,45 +112,17 @@ pub fn grpc_incoming(
     tokio_stream::wrappers::ReceiverStream::new(receive)
 }
 
-/// A gRPC connection holding its place under the cap, closed when idle.
-pub struct Guarded {
-    io: Idle<TcpStream>,
-    _permit: OwnedSemaphorePermit,
-}
-
-impl tonic::transport::server::Connected for Guarded {
-    type ConnectInfo = tonic::transport::server::TcpConnectInfo;
-
-    fn connect_info(&self) -> Self::ConnectInfo {
-        self.io.inner.connect_info()
-    }
-}
-
-impl AsyncRead for Guarded {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.io).poll_read(cx, buf)
-    }
-}
-
-impl AsyncWrite for Guarded {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        data: &[u8],
-    ) -> Poll<io::Result<usize>> {
-        Pin::new(&mut self.io).poll_write(cx, data)
-    }
-
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.io).poll_flush(cx)
-    }
-
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.io).poll_shutdown(cx)
+/// The next connection; an accept error (out of descriptors) is logged and retried after
+/// 50 ms, never returned.
+async fn accept(listener: &TcpListener) -> TcpStream {
+    loop {
+        match listener.accept().await {
+            Ok((stream, _)) => return stream,
+            Err(err) => {
+                tracing::warn!(%err, "accept failed; retrying");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
     }
 }
 
@@ -184,24 +139,36 @@ async fn refuse(mut stream: TcpStream) {
     .await;
 }
 
-/// A stream that fails with `TimedOut` once nothing has been read or written for `timeout`.
-struct Idle<T> {
-    inner: T,
+/// A connection holding its place under the cap, which fails with `TimedOut` once nothing
+/// has been read or written for `timeout`.
+pub struct Guarded {
+    stream: TcpStream,
     timeout: Duration,
     deadline: Pin<Box<Sleep>>,
+    _permit: OwnedSemaphorePermit,
 }
 
-impl<T> Idle<T> {
-    fn new(inner: T, timeout: Duration) -> Self {
-        Self {
-            inner,
+impl Guarded {
+    /// `stream` with a place under the cap, or back when there is none.
+    fn new(
+        stream: TcpStream,
+        permits: &Arc<Semaphore>,
+        timeout: Duration,
+    ) -> Result<Self, TcpStream> {
+        let Ok(permit) = permits.clone().try_acquire_owned() else {
+            return Err(stream);
+        };
+        Ok(Self {
+            stream,
             timeout,
             deadline: Box::pin(tokio::time::sleep(timeout)),
-        }
+            _permit: permit,
+        })
     }
 
     fn active(&mut self) {
-        self.deadline.as_mut().reset(Instant::now() + self.timeout);
+        let next = Instant::now() + self.timeout;
+        self.deadline.as_mut().reset(next);
     }
 
     fn expired(&mut self, cx: &mut Context<'_>) -> bool {
@@ -209,18 +176,26 @@ impl<T> Idle<T> {
     }
 }
 
+impl tonic::transport::server::Connected for Guarded {
+    type ConnectInfo = tonic::transport::server::TcpConnectInfo;
+
+    fn connect_info(&self) -> Self::ConnectInfo {
+        self.stream.connect_info()
+    }
+}
+
 fn timed_out() -> io::Error {
     io::Error::new(io::ErrorKind::TimedOut, "connection idle")
 }
 
-impl<T: AsyncRead + Unpin> AsyncRead for Idle<T> {
+impl AsyncRead for Guarded {
     fn poll_read(
         mut self: Pin<&mut Self>,
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
         let before = buf.filled().len();
-        match Pin::new(&mut self.inner).poll_read(cx, buf) {
+        match Pin::new(&mut self.stream).poll_read(cx, buf) {
             Poll::Ready(result) => {
                 if buf.filled().len() > before {
                     self.active();
@@ -233,13 +208,13 @@ impl<T: AsyncRead + Unpin> AsyncRead for Idle<T> {
     }
 }
 
-impl<T: AsyncWrite + Unpin> AsyncWrite for Idle<T> {
+impl AsyncWrite for Guarded {
     fn poll_write(
         mut self: Pin<&mut Self>,
         cx: &mut Context<'_>,
         data: &[u8],
     ) -> Poll<io::Result<usize>> {
-        match Pin::new(&mut self.inner).poll_write(cx, data) {
+        match Pin::new(&mut self.stream).poll_write(cx, data) {
             Poll::Ready(Ok(n)) => {
                 if n > 0 {
                     self.active();
@@ -254,10 +229,10 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for Idle<T> {
     }
 
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_flush(cx)
+        Pin::new(&mut self.stream).poll_flush(cx)
     }
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_shutdown(cx)
+        Pin::new(&mut self.stream).poll_shutdown(cx)
     }
 }

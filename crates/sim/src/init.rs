@@ -1,12 +1,13 @@
 //! `crm world init`: a world folder drafted from a hand's description alone
 //! ([`crate::hand::draft`]), loaded back as every command would load it before it is reported.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::assets::Assets;
 use crate::error::{Error, Result, invalid_at as invalid};
 use crate::hand::description::Description;
 use crate::hand::draft::draft;
+use crate::staging::{refuse_occupied, write_json, write_world};
 use crate::world::World;
 
 /// What `crm world init` wrote: the loaded world and the guesses to confirm.
@@ -16,9 +17,9 @@ pub struct Drafted {
     pub notes: Vec<String>,
 }
 
-/// Drafts `world.json` and `hand.json` in `out` (absent or empty) for the description `hand`.
-/// The profile names the description relative to the `CRM_ASSETS` folder it lies in, else by
-/// its absolute path. Nothing is written when the draft does not load.
+/// Drafts `world.json` and `hand.json` in `out` (absent or empty) for the description `hand`,
+/// whole or not at all ([`crate::staging`]). The profile names the description relative to
+/// the `CRM_ASSETS` folder it lies in, else by its absolute path.
 pub fn init_world(
     hand: &Path,
     out: &Path,
@@ -26,17 +27,7 @@ pub fn init_world(
     palm: Option<&str>,
     assets: &Assets,
 ) -> Result<Drafted> {
-    if out.exists()
-        && std::fs::read_dir(out)
-            .map(|mut d| d.next().is_some())
-            .unwrap_or(true)
-    {
-        return Err(invalid(
-            out,
-            "--out",
-            "the world folder exists and is not empty",
-        ));
-    }
+    refuse_occupied(out)?;
     let description = Description::load(hand, assets)?;
     let absolute = std::path::absolute(hand).map_err(|error| Error::Io {
         path: hand.display().to_string(),
@@ -54,41 +45,14 @@ pub fn init_world(
         Some(name) => name.to_string(),
         None => stem_name(hand),
     };
-    let world = serde_json::json!({ "name": name, "hand": "hand.json" });
-    let profile = serde_json::to_string_pretty(&drafted.profile).unwrap_or_default();
-    // A hidden sibling no user folder is named like, moved into place once the draft loads.
-    let leaf = out.file_name().and_then(|n| n.to_str()).unwrap_or("world");
-    let staging: PathBuf = out.with_file_name(format!(".{leaf}.crm-init-{}", std::process::id()));
-    let write = |path: PathBuf, text: String| {
-        std::fs::write(&path, text + "\n").map_err(|error| Error::Io {
-            path: path.display().to_string(),
-            error,
-        })
-    };
-    let _ = std::fs::remove_dir_all(&staging);
-    std::fs::create_dir_all(&staging).map_err(|error| Error::Io {
-        path: staging.display().to_string(),
-        error,
+    let world = write_world(out, "crm-init", |staging| {
+        write_json(
+            &staging.join("world.json"),
+            &serde_json::json!({ "name": name, "hand": "hand.json" }),
+        )?;
+        write_json(&staging.join("hand.json"), &drafted.profile)?;
+        World::load_with(staging, assets)
     })?;
-    write(staging.join("world.json"), world.to_string())?;
-    write(staging.join("hand.json"), profile)?;
-    let loaded = World::load_with(&staging, assets);
-    let loaded = match loaded {
-        Ok(world) => world,
-        Err(err) => {
-            let _ = std::fs::remove_dir_all(&staging);
-            return Err(err);
-        }
-    };
-    let _ = std::fs::remove_dir(out);
-    std::fs::rename(&staging, out).map_err(|error| Error::Io {
-        path: out.display().to_string(),
-        error,
-    })?;
-    let world = World {
-        dir: Some(out.to_path_buf()),
-        ..loaded
-    };
     Ok(Drafted {
         world,
         notes: drafted.notes,

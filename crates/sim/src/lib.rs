@@ -37,6 +37,7 @@ pub mod ready;
 pub mod scene;
 pub mod script;
 pub mod spec;
+mod staging;
 pub mod stiction;
 pub mod view;
 pub mod world;

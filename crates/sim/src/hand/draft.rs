@@ -45,7 +45,6 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
             .filter(|&j| description.joints[j].parent == link)
             .collect()
     };
-    let moving = |joint: usize| description.joints[joint].kind != JointKind::Fixed;
     // Moving joints in the subtree below `joint` (itself included).
     fn moving_below(d: &Description, joint: usize) -> usize {
         let own = usize::from(d.joints[joint].kind != JointKind::Fixed);
@@ -110,7 +109,7 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
             }
             at = children(description.joints[j].child)
                 .into_iter()
-                .filter(|&k| moving(k) || moving_below(description, k) > 0)
+                .filter(|&k| moving_below(description, k) > 0)
                 .max_by_key(|&k| moving_below(description, k));
         }
         if !joints.is_empty() {

@@ -16,13 +16,11 @@ use sha2::{Digest, Sha256};
 use crate::assets::Assets;
 use crate::error::{Result, invalid_at as invalid, read_text as read};
 
-/// Where a document's includes are searched and which files it read.
+/// Where a document's includes are searched, and the digest of what it read.
 pub struct Expansion<'a> {
     /// The main file's folder.
     pub base: &'a Path,
     pub assets: &'a Assets,
-    /// Every file read, the main one first.
-    pub files: Vec<PathBuf>,
     /// The text of every file read, in order: part of the world's hash.
     pub digest: Sha256,
 }
@@ -32,7 +30,6 @@ impl<'a> Expansion<'a> {
         Self {
             base,
             assets,
-            files: Vec::new(),
             digest: Sha256::new(),
         }
     }
@@ -52,7 +49,6 @@ impl<'a> Expansion<'a> {
             // are its own and a part with several top-level elements is still one document.
             super::numbers::check(text, path, super::numbers::Format::Mjcf)?;
         }
-        self.files.push(path.to_path_buf());
         add_content(&mut self.digest, text.as_bytes());
         let mut out = String::with_capacity(text.len());
         let mut rest = text;

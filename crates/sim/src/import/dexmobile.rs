@@ -22,6 +22,7 @@ use crate::assets::Assets;
 use crate::benchmark::Objective;
 use crate::error::{Error, Result, invalid_at, read_text};
 use crate::hand::description::Description;
+use crate::staging::{refuse_occupied, write_json, write_world};
 use crate::world::World;
 
 /// Where the authors publish it.
@@ -433,14 +434,6 @@ fn tipping_objects(world: &World) -> Result<Vec<String>> {
     Ok(tipping)
 }
 
-fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
-    let text = serde_json::to_string_pretty(value).unwrap_or_default() + "\n";
-    std::fs::write(path, text).map_err(|error| Error::Io {
-        path: path.display().to_string(),
-        error,
-    })
-}
-
 /// Checks that `repo` is a copy of the authors' repository, naming the first file missing.
 pub fn check_layout(repo: &Path) -> Result<()> {
     for file in REQUIRED {
@@ -463,16 +456,7 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
         path: repo.display().to_string(),
         error,
     })?;
-    let occupied = std::fs::read_dir(out)
-        .map(|mut d| d.next().is_some())
-        .unwrap_or(false);
-    if occupied {
-        return Err(invalid_at(
-            out,
-            "--out",
-            "the folder exists and is not empty; remove it or name another",
-        ));
-    }
+    refuse_occupied(out)?;
     let csv_path = repo.join(REQUIRED[0]);
     let rows = csv::parse(&read_text(&csv_path)?, &csv_path)?;
     let (benchmark, sources) = benchmark(&repo, &csv_path, &rows)?;
@@ -484,22 +468,7 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
     let profile = svh::profile(&description)
         .map_err(|message| invalid_at(&description_path, "robot", message))?;
 
-    let parent = out
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let staging = parent.join(format!(
-        ".{}.import-{}",
-        out.file_name().and_then(|n| n.to_str()).unwrap_or("world"),
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&staging);
-    let io = |path: &Path, error| Error::Io {
-        path: path.display().to_string(),
-        error,
-    };
-    std::fs::create_dir_all(&staging).map_err(|e| io(&staging, e))?;
-    let written = (|| -> Result<World> {
+    let world = write_world(out, "import", |staging| {
         let mut world = json!({
             "name": options.name,
             "hand": "hand.json",
@@ -520,7 +489,7 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
             "objects": sources,
         });
         write_json(&staging.join("sources.json"), &sources)?;
-        let world = World::load_with(&staging, &Assets::default())?;
+        let world = World::load_with(staging, &Assets::default())?;
         let tipping = tipping_objects(&world)?;
         if tipping.is_empty() {
             return Ok(world);
@@ -557,7 +526,7 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
         }
         write_json(&staging.join("benchmark.json"), &benchmark)?;
         write_json(&staging.join("sources.json"), &sources)?;
-        let world = World::load_with(&staging, &Assets::default())?;
+        let world = World::load_with(staging, &Assets::default())?;
         match tipping_objects(&world)?.first() {
             Some(name) => Err(invalid_at(
                 &staging.join("benchmark.json"),
@@ -566,18 +535,7 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
             )),
             None => Ok(world),
         }
-    })();
-    let world = match written {
-        Ok(world) => world,
-        Err(err) => {
-            let _ = std::fs::remove_dir_all(&staging);
-            return Err(err);
-        }
-    };
-    if out.exists() {
-        std::fs::remove_dir(out).map_err(|e| io(out, e))?;
-    }
-    std::fs::rename(&staging, out).map_err(|e| io(out, e))?;
+    })?;
     Ok(Imported {
         dir: out.to_path_buf(),
         objects: world.benchmark.objects.len(),
