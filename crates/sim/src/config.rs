@@ -131,19 +131,22 @@ pub struct SimConfig {
     /// Hands without a relaxed pose start preshaped and are unaffected.
     pub preshape_speed: f32,
     /// Training's shortcut through the hold (0, the default, is off: the paper's full hold).
-    /// With `settle_s > 0`, a hold-objective grasp whose object has rested in the palm's
-    /// frame (within [`SETTLE_DISTANCE`] and [`SETTLE_ANGLE`]) for `settle_s` seconds of the
-    /// judge's steady hold passes at once, instead of after `hold_s`. Only training sets it;
-    /// evaluations run the full hold. Agreement with the full hold is measured by `crm bench
-    /// hold` (docs/BENCHMARKS.md).
+    /// With `settle_s > 0`, a hold-objective grasp passes at once, instead of after `hold_s`,
+    /// when it is lifted and steady and its object has rested in the palm's frame (within
+    /// [`SETTLE_DISTANCE`] and [`SETTLE_ANGLE`]) for `settle_s` seconds since it cleared the
+    /// table (the drop test's height, in a steady grasp): the rest may begin during the
+    /// arm's lift. Only training sets it; evaluations run the full hold. Agreement with the
+    /// full hold is measured by `crm bench hold` (docs/BENCHMARKS.md).
     pub settle_s: f32,
 }
 
 /// How far (m) the object may move in the palm's frame and still count as resting
-/// ([`SimConfig::settle_s`]): 1 mm.
-pub const SETTLE_DISTANCE: f32 = 1e-3;
-/// How far (rad) it may turn there: 0.01 rad.
-pub const SETTLE_ANGLE: f32 = 0.01;
+/// ([`SimConfig::settle_s`]): 2 mm, the widest of 1, 2 and 4 mm with which the shipped
+/// model's 1,000 episodes (`crm bench hold --settle-s 0.25`) kept every outcome of the full
+/// hold; at 4 mm two bowls that tip out of the hand later passed (docs/BENCHMARKS.md).
+pub const SETTLE_DISTANCE: f32 = 2e-3;
+/// How far (rad) it may turn there: 0.02 rad, measured with [`SETTLE_DISTANCE`].
+pub const SETTLE_ANGLE: f32 = 0.02;
 
 impl Default for SimConfig {
     fn default() -> Self {

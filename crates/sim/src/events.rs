@@ -52,7 +52,7 @@ pub struct Judge {
     graded: bool,
     grasp_steps: usize,
     held_steps: usize,
-    /// Steady steps with the object at rest in the palm since `settle_from`.
+    /// Steps clear of the table with the object at rest in the palm since `settle_from`.
     settled_steps: usize,
     settle_from: Option<([f32; 3], [f32; 4])>,
     sustained_steps: usize,
@@ -196,11 +196,12 @@ impl Judge {
         steps as f32 * self.control_dt
     }
 
-    /// Counts the steady steps in which the object has stayed where it was in the palm's
-    /// frame when the count began (within [`SETTLE_DISTANCE`] and [`SETTLE_ANGLE`]); a step
-    /// that moved it, or one that is not steady, starts the count again. Returns the count.
-    fn settle(&mut self, steady: bool, in_palm: ([f32; 3], [f32; 4])) -> usize {
-        if !steady || self.settle_s <= 0.0 {
+    /// Counts the steps, clear of the table in a steady grasp (`clear`), in which the object
+    /// has stayed where it was in the palm's frame when the count began (within
+    /// [`SETTLE_DISTANCE`] and [`SETTLE_ANGLE`]); a step that moved it, or one that is not
+    /// clear, starts the count again. Returns the count.
+    fn settle(&mut self, clear: bool, in_palm: ([f32; 3], [f32; 4])) -> usize {
+        if !clear || self.settle_s <= 0.0 {
             self.settle_from = None;
             self.settled_steps = 0;
             return 0;
@@ -259,9 +260,16 @@ impl Judge {
             let lift_part = (s.displacement[2] / self.lift_height).clamp(0.0, 1.0);
             let hold_part = (self.seconds(self.held_steps) / self.hold_s).clamp(0.0, 1.0);
             self.progress = 0.5 * lift_part + 0.5 * hold_part;
-            let settled = self.settle(steady, s.in_palm);
+            // The shortcut's rest counts from when the object is clear of the table (above
+            // the drop test's height) in a steady grasp, so it can run during the lift; it
+            // passes only once the object is lifted as well.
+            let clear = self.graded
+                && s.displacement[2] >= self.drop_height
+                && s.contacts >= 2
+                && s.speed < 0.3;
+            let settled = self.settle(clear, s.in_palm);
             self.seconds(self.held_steps) >= self.hold_s - 1e-6
-                || (self.settle_s > 0.0 && self.seconds(settled) >= self.settle_s - 1e-6)
+                || (steady && self.settle_s > 0.0 && self.seconds(settled) >= self.settle_s - 1e-6)
         } else {
             let measure = match self.objective {
                 Objective::Twist => s.twist_torque * self.required.signum(),
@@ -477,13 +485,31 @@ mod tests {
             assert!(!resting.judge(&at(0.0)).0.contains(&"succ"), "step {step}");
         }
         assert!(resting.judge(&at(0.0)).0.contains(&"succ"));
-        // Creeping 0.2 mm a step, 1 mm in five: the count starts again, the full hold decides.
+        // The rest counts from when the object clears the table (the drop test's height),
+        // during the arm's lift; it passes at the first lifted step after.
+        let mut rising = judge();
+        let rise = |z: f32| Snapshot {
+            displacement: [0.0, 0.0, z],
+            ..at(0.0)
+        };
+        for step in 0..=settle {
+            let z = config.drop_height + 1e-3;
+            assert!(!rising.judge(&rise(z)).0.contains(&"succ"), "step {step}");
+        }
+        assert!(rising.judge(&rise(config.lift_height)).0.contains(&"succ"));
+        // Under the drop test's height it does not count.
+        let mut low = judge();
+        for _ in 0..=settle {
+            low.judge(&rise(config.drop_height - 1e-3));
+        }
+        assert!(!low.judge(&rise(config.lift_height)).0.contains(&"succ"));
+        // Creeping 0.4 mm a step, 2 mm in five: the count starts again, the full hold decides.
         let mut creeping = judge();
         for step in 0..hold - 1 {
-            let x = 2e-4 * step as f32;
+            let x = 4e-4 * step as f32;
             assert!(!creeping.judge(&at(x)).0.contains(&"succ"), "step {step}");
         }
-        assert!(creeping.judge(&at(2e-4 * hold as f32)).0.contains(&"succ"));
+        assert!(creeping.judge(&at(4e-4 * hold as f32)).0.contains(&"succ"));
         // Off (the default): only the full hold passes.
         let (mut full, _) = grasping_judge(Objective::Lift, None);
         for _ in 0..hold - 1 {

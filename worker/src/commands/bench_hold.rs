@@ -51,6 +51,8 @@ struct HoldReport {
     mean_sim_seconds_shortcut: f64,
     wall_s_full_hold: f64,
     wall_s_shortcut: f64,
+    /// Per task: episodes and mean simulated seconds, full hold then shortcut.
+    per_task: std::collections::BTreeMap<String, (u64, f64, f64)>,
     disagreements: Vec<Disagreement>,
 }
 
@@ -125,6 +127,17 @@ fn compare(
         })
         .collect();
     let agree = full.len() as u64 - disagreements.len() as u64;
+    let mut per_task = std::collections::BTreeMap::<String, (u64, f64, f64)>::new();
+    for (a, b) in full.iter().zip(&short) {
+        let row = per_task.entry(a.task.clone()).or_default();
+        row.0 += 1;
+        row.1 += a.sim_seconds;
+        row.2 += b.sim_seconds;
+    }
+    for row in per_task.values_mut() {
+        row.1 /= row.0 as f64;
+        row.2 /= row.0 as f64;
+    }
     Ok(HoldReport {
         episodes: full.len() as u64,
         seed,
@@ -137,6 +150,7 @@ fn compare(
         mean_sim_seconds_shortcut: seconds(&short),
         wall_s_full_hold: full_wall,
         wall_s_shortcut: short_wall,
+        per_task,
         disagreements,
     })
 }
