@@ -1,4 +1,5 @@
-//! End-to-end test of `crm serve-policy`: the `Policy` gRPC service over a checkpoint.
+//! End-to-end test of `crm serve-policy`: the `Policy` gRPC service over a checkpoint, behind
+//! a token.
 
 mod support;
 
@@ -35,6 +36,8 @@ fn the_policy_service_acts_and_refuses_bad_observations() {
             "serve-policy",
             "--listen",
             &format!("127.0.0.1:{port}"),
+            "--token",
+            TOKEN,
             "--checkpoint",
         ])
         .arg(&checkpoint)
@@ -52,9 +55,22 @@ fn the_policy_service_acts_and_refuses_bad_observations() {
 
     let runtime = tokio::runtime::Runtime::new().expect("runtime");
     runtime.block_on(async {
-        let mut client = PolicyClient::connect(format!("http://127.0.0.1:{port}"))
+        let channel = tonic::transport::Channel::from_shared(format!("http://127.0.0.1:{port}"))
+            .expect("url")
+            .connect()
             .await
             .expect("connect");
+        // `--token`: a call without it is refused.
+        let refused = PolicyClient::new(channel.clone())
+            .describe(pb::DescribeRequest {})
+            .await
+            .expect_err("refused");
+        assert_eq!(refused.code(), tonic::Code::Unauthenticated);
+        let mut client = PolicyClient::with_interceptor(channel, |mut r: tonic::Request<()>| {
+            let bearer = format!("Bearer {TOKEN}").parse().expect("header");
+            r.metadata_mut().insert("authorization", bearer);
+            Ok(r)
+        });
         let info = client
             .describe(pb::DescribeRequest {})
             .await

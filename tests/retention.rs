@@ -11,8 +11,6 @@ use std::path::Path;
 use serde_json::Value;
 use support::*;
 
-const TOKEN: &str = "s3cret";
-
 /// A training run long enough for a few checkpoints at one a second, recorded.
 fn train(seed: u64) -> String {
     format!(
@@ -163,7 +161,7 @@ fn old_checkpoints_are_removed_and_a_deleted_run_leaves_nothing_behind() {
         format!("/api/v1/jobs/{eval}"),
         format!("/api/v1/checkpoints/{final_a}"),
     ] {
-        let gone = http(&addr, "GET", &path, None, None);
+        let gone = http(&addr, "GET", &path, None, Some(TOKEN));
         assert_eq!(gone.status, 404, "{path}");
     }
     let left = files(&checkpoint_dir);

@@ -394,7 +394,7 @@ fn a_killed_workers_job_is_requeued_and_resumed_from_its_checkpoint() {
 }
 
 #[test]
-fn tokens_guard_workers_and_mutating_calls() {
+fn tokens_guard_workers_and_every_call() {
     let data = TempDir::new("token");
     let server = start_server(&data.0, &["--token", "s3cret"]);
     let addr = server.http.clone();
@@ -403,14 +403,31 @@ fn tokens_guard_workers_and_mutating_calls() {
     assert_eq!(error_field(&reply), "authorization");
     let reply = http(&addr, "POST", "/api/v1/jobs", Some(TRAIN), Some("wrong"));
     assert_eq!(reply.status, 401);
+    // Reads need the token too: none, a wrong one or a prefix of it gets 401; GET and HEAD
+    // alike. Only `/healthz` and the dashboard's pages answer without one.
+    for token in [None, Some("wrong"), Some("s3cre")] {
+        for method in ["GET", "HEAD"] {
+            let reply = http(&addr, method, "/api/v1/jobs", None, token);
+            assert_eq!(reply.status, 401, "{method} with {token:?}");
+        }
+    }
+    assert_eq!(http(&addr, "GET", "/healthz", None, None).status, 200);
+    assert_eq!(http(&addr, "GET", "/", None, None).status, 200);
+    assert_eq!(
+        http(&addr, "GET", "/runs/999", None, None).status,
+        200,
+        "no lookup without a token"
+    );
     assert_eq!(
         get(&addr, "/api/v1/jobs")["jobs"].as_array().map(Vec::len),
         Some(0)
     );
     let reply = http(&addr, "POST", "/api/v1/jobs", Some(TRAIN), Some("s3cret"));
     assert_eq!(reply.status, 201);
-    // HEAD is a read, as GET is.
-    assert_eq!(http(&addr, "HEAD", "/api/v1/jobs", None, None).status, 200);
+    assert_eq!(
+        http(&addr, "HEAD", "/api/v1/jobs", None, Some("s3cret")).status,
+        200
+    );
     // A worker refused at registration exits 2 with the coordinator's reason: a wrong token,
     // or a name that would read otherwise than it is (a right-to-left override).
     let refused = |args: &[&str]| {

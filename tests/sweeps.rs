@@ -9,8 +9,6 @@ mod support;
 use serde_json::{Value, json};
 use support::*;
 
-const TOKEN: &str = "s3cret";
-
 fn post(addr: &str, path: &str, body: &Value) -> Reply {
     http(addr, "POST", path, Some(&body.to_string()), Some(TOKEN))
 }
@@ -219,7 +217,7 @@ fn a_sweep_is_validated_whole_runs_its_grid_and_aggregates_table_one() {
         "{after}"
     );
     assert_eq!(
-        http(&addr, "GET", "/api/v1/sweeps/999", None, None).status,
+        http(&addr, "GET", "/api/v1/sweeps/999", None, Some(TOKEN)).status,
         404
     );
 }

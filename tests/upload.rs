@@ -14,7 +14,6 @@ use std::process::Command;
 use serde_json::Value;
 use support::*;
 
-const TOKEN: &str = "s3cret";
 /// Upload limit of the coordinator under test (the shipped model is about 630 KB).
 const LIMIT: usize = 1_000_000;
 
@@ -232,7 +231,7 @@ fn checkpoints_made_elsewhere_are_stored_once_checked_and_evaluated_remotely() {
         "GET",
         &format!("/api/v1/checkpoints/{id}/download"),
         None,
-        None,
+        Some(TOKEN),
     );
     assert_eq!(download.status, 200);
     assert!(

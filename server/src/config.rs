@@ -18,9 +18,40 @@ pub struct ServerConfig {
     /// Folder of the sqlite file and the checkpoints (created if missing).
     #[arg(long, default_value = "data")]
     pub data_dir: PathBuf,
-    /// Bearer token required from workers and for mutating REST calls.
+    /// Bearer token with every scope: reads, submissions and workers (docs/SECURITY.md). With
+    /// any token set, only `/healthz` and the dashboard's pages answer without one.
     #[arg(long, env = "CRM_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
+    /// Bearer token that may read: every GET of the API, downloads, the event stream, the
+    /// dashboard.
+    #[arg(long, env = "CRM_READ_TOKEN", hide_env_values = true)]
+    pub read_token: Option<String>,
+    /// Bearer token that may submit (jobs, sweeps, uploads, cancels, deletes) and read.
+    #[arg(long, env = "CRM_SUBMIT_TOKEN", hide_env_values = true)]
+    pub submit_token: Option<String>,
+    /// Bearer token of rollout workers (the gRPC Coordinator service).
+    #[arg(long, env = "CRM_WORKER_TOKEN", hide_env_values = true)]
+    pub worker_token: Option<String>,
+    /// A JSON file of tokens, `{"token", "read", "submit", "worker"}` (any of them), for
+    /// those the flags and variables leave unset; keeps them out of the process list.
+    #[arg(long, value_name = "FILE")]
+    pub tokens_file: Option<PathBuf>,
+    /// REST requests one client address may make per second, on average; beyond its burst
+    /// it is answered 429 with `Retry-After`. 0 turns the limit off. Default 50 (a dashboard
+    /// page makes a few a second; nginx's `limit_req` examples use 1-10 per second).
+    #[arg(long, default_value_t = 50)]
+    pub rate_limit_per_s: u32,
+    /// Requests a client address may make at once above its rate (the bucket's size).
+    /// Default 200: a dashboard's first load and a burst of `crm results` calls.
+    #[arg(long, default_value_t = 200)]
+    pub rate_limit_burst: u32,
+    /// PEM certificate chain of the coordinator: with `--tls-key`, both listeners (REST and
+    /// gRPC) speak TLS only. `crm certs dev DIR` makes one to try.
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// PEM private key of `--tls-cert`.
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
     /// Seconds a lease lives without a heartbeat before the job is re-queued.
     #[arg(long, default_value_t = 30)]
     pub lease_ttl_s: u32,
@@ -83,6 +114,14 @@ impl Default for ServerConfig {
             grpc: "127.0.0.1:50051".into(),
             data_dir: PathBuf::from("data"),
             token: None,
+            read_token: None,
+            submit_token: None,
+            worker_token: None,
+            tokens_file: None,
+            rate_limit_per_s: 50,
+            rate_limit_burst: 200,
+            tls_cert: None,
+            tls_key: None,
             lease_ttl_s: 30,
             heartbeat_interval_s: 5,
             max_body_bytes: 256 * 1024,
@@ -112,9 +151,10 @@ impl ServerConfig {
                 self.heartbeat_interval_s
             );
         }
-        if self.token.as_deref() == Some("") {
-            anyhow::bail!("token: must not be empty");
+        if self.tls_cert.is_some() != self.tls_key.is_some() {
+            anyhow::bail!("tls_cert and tls_key: give both or neither");
         }
+        crate::auth::Tokens::configured(self)?;
         if self.keep_checkpoints == 0 {
             anyhow::bail!("keep_checkpoints: must be at least 1 (a job resumes from its newest)");
         }

@@ -5,11 +5,14 @@
 //! Links neither rapier, candle nor rerun.
 
 pub mod api;
+pub mod auth;
 pub mod charts;
 pub mod config;
 pub mod grpc;
 pub mod listen;
+pub mod secrets;
 pub mod store;
+pub mod tls;
 pub mod uploads;
 pub mod web;
 
@@ -30,6 +33,10 @@ pub struct AppState {
     /// The worlds jobs may name: the built-in one first, then those of `--worlds`.
     pub worlds: Arc<Vec<crm_api::worlds::WorldEntry>>,
     pub config: ServerConfig,
+    /// The bearer tokens and their scopes (`auth.rs`).
+    pub tokens: auth::Tokens,
+    /// The REST API's per-client request budget (`--rate-limit-per-s`).
+    pub rate: api::rate::Limiter,
     /// A counter bumped when a job is queued, changes state or reports progress; live pages
     /// follow it through `GET /api/v1/events`. [`SHUTDOWN`] ends their streams.
     pub events: tokio::sync::watch::Sender<u64>,
@@ -51,6 +58,8 @@ impl AppState {
 pub struct Running {
     pub http_addr: SocketAddr,
     pub grpc_addr: SocketAddr,
+    /// Whether both listeners speak TLS (`https://` addresses).
+    pub tls: bool,
     pub state: Arc<AppState>,
     tasks: Vec<tokio::task::JoinHandle<anyhow::Result<()>>>,
     shutdown: Arc<Notify>,
@@ -94,10 +103,17 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
     let catalog = Arc::new(Catalog::builtin()?);
     let worlds =
         Arc::new(crm_api::worlds::discover(config.worlds.as_deref()).context("reading --worlds")?);
+    let tokens = auth::Tokens::configured(&config)?;
+    let identity = match (&config.tls_cert, &config.tls_key) {
+        (Some(cert), Some(key)) => Some(tls::Identity::load(cert, key)?),
+        _ => None,
+    };
     let state = Arc::new(AppState {
         store,
         catalog,
         worlds,
+        tokens,
+        rate: api::rate::Limiter::new(config.rate_limit_per_s, config.rate_limit_burst),
         config: config.clone(),
         events: tokio::sync::watch::channel(0).0,
         event_streams: Arc::new(tokio::sync::Semaphore::new(config.max_event_streams.max(1))),
@@ -127,14 +143,22 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
         header_timeout: std::time::Duration::from_secs(config.header_timeout_s.max(1).into()),
         idle_timeout: std::time::Duration::from_secs(config.idle_timeout_s.max(1).into()),
     };
+    let rest_tls = identity.as_ref().map(|i| i.rest.clone());
     let http_task = tokio::spawn(async move {
-        listen::serve(http, router, limits, async move { stop.notified().await }).await;
+        let stopped = async move { stop.notified().await };
+        listen::serve(http, router, limits, rest_tls, stopped).await;
         anyhow::Ok(())
     });
     let stop = shutdown.clone();
     let service = grpc::service(state.clone());
+    let mut builder = tonic::transport::Server::builder();
+    if let Some(identity) = &identity {
+        builder = builder
+            .tls_config(identity.grpc())
+            .context("the gRPC listener's TLS")?;
+    }
     let grpc_task = tokio::spawn(async move {
-        tonic::transport::Server::builder()
+        builder
             .add_service(service)
             .serve_with_incoming_shutdown(listen::grpc_incoming(grpc, limits), async move {
                 stop.notified().await
@@ -165,6 +189,7 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
     Ok(Running {
         http_addr,
         grpc_addr,
+        tls: identity.is_some(),
         state,
         tasks: vec![http_task, grpc_task, sweeper],
         shutdown,

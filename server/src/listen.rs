@@ -16,6 +16,8 @@ use std::task::{Context, Poll};
 use std::time::Duration;
 
 use axum::Router;
+
+use crate::api::rate::ClientAddr;
 use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
 use hyper_util::server::conn::auto::Builder;
 use hyper_util::service::TowerToHyperService;
@@ -36,6 +38,9 @@ pub struct Limits {
     pub idle_timeout: Duration,
 }
 
+/// What a listener speaks: plain TCP, or TLS with this configuration (`tls.rs`).
+pub type Tls = Option<Arc<rustls::ServerConfig>>;
+
 /// The answer to a connection beyond the cap.
 const BUSY: &str = "{\"error\":{\"code\":\"unavailable\",\"field\":\"connection\",\"message\":\"too many open connections; retry later\"}}";
 
@@ -44,8 +49,10 @@ pub async fn serve(
     listener: TcpListener,
     router: Router,
     limits: Limits,
+    tls: Tls,
     stop: impl Future<Output = ()>,
 ) {
+    let acceptor = tls.map(tokio_rustls::TlsAcceptor::from);
     let permits = Arc::new(Semaphore::new(limits.max_connections));
     let (close, closing) = watch::channel(false);
     let mut stop = std::pin::pin!(stop);
@@ -54,6 +61,7 @@ pub async fn serve(
             stream = accept(&listener) => stream,
             () = &mut stop => break,
         };
+        let client = stream.peer_addr().ok();
         let guarded = match Guarded::new(stream, &permits, limits.idle_timeout) {
             Ok(guarded) => guarded,
             Err(stream) => {
@@ -61,25 +69,27 @@ pub async fn serve(
                 continue;
             }
         };
-        let service = TowerToHyperService::new(router.clone());
-        let mut closing = closing.clone();
-        tokio::spawn(async move {
-            let mut builder = Builder::new(TokioExecutor::new());
-            builder
-                .http1()
-                .timer(TokioTimer::new())
-                .header_read_timeout(limits.header_timeout);
-            builder.http2().timer(TokioTimer::new());
-            let conn = builder.serve_connection_with_upgrades(TokioIo::new(guarded), service);
-            let mut conn = std::pin::pin!(conn);
-            // `is_ok` lets go of the watch's read guard before the select's output holds it.
-            let shutdown = async { closing.wait_for(|c| *c).await.is_ok() };
-            tokio::select! {
-                _ = conn.as_mut() => {}
-                _ = shutdown => {
-                    conn.as_mut().graceful_shutdown();
-                    let _ = conn.await;
+        // Each request carries its connection's address, for the per-client rate limit.
+        let service = TowerToHyperService::new(tower::util::MapRequest::new(
+            router.clone(),
+            move |mut request: axum::extract::Request<hyper::body::Incoming>| {
+                if let Some(addr) = client {
+                    request.extensions_mut().insert(ClientAddr(addr));
                 }
+                request
+            },
+        ));
+        let closing = closing.clone();
+        let acceptor = acceptor.clone();
+        tokio::spawn(async move {
+            let Some(acceptor) = acceptor else {
+                return connection(TokioIo::new(guarded), service, limits, closing).await;
+            };
+            // The handshake gets the header timeout; a client that stalls in it is dropped.
+            match tokio::time::timeout(limits.header_timeout, acceptor.accept(guarded)).await {
+                Ok(Ok(tls)) => connection(TokioIo::new(tls), service, limits, closing).await,
+                Ok(Err(err)) => tracing::debug!(%err, "TLS handshake failed"),
+                Err(_) => tracing::debug!("TLS handshake timed out"),
             }
         });
     }
@@ -87,6 +97,42 @@ pub async fn serve(
     // Open connections finish their requests, for at most 10 s.
     let all = u32::try_from(limits.max_connections).unwrap_or(u32::MAX);
     let _ = tokio::time::timeout(Duration::from_secs(10), permits.acquire_many(all)).await;
+}
+
+/// Serves one connection's requests until it closes, or until `closing` asks it to finish.
+async fn connection<I, S>(
+    io: TokioIo<I>,
+    service: S,
+    limits: Limits,
+    mut closing: watch::Receiver<bool>,
+) where
+    I: AsyncRead + AsyncWrite + Unpin + Send + 'static,
+    S: hyper::service::Service<
+            hyper::Request<hyper::body::Incoming>,
+            Response = axum::response::Response,
+            Error = std::convert::Infallible,
+        > + Clone
+        + Send
+        + 'static,
+    S::Future: Send + 'static,
+{
+    let mut builder = Builder::new(TokioExecutor::new());
+    builder
+        .http1()
+        .timer(TokioTimer::new())
+        .header_read_timeout(limits.header_timeout);
+    builder.http2().timer(TokioTimer::new());
+    let conn = builder.serve_connection_with_upgrades(io, service);
+    let mut conn = std::pin::pin!(conn);
+    // `is_ok` lets go of the watch's read guard before the select's output holds it.
+    let shutdown = async { closing.wait_for(|c| *c).await.is_ok() };
+    tokio::select! {
+        _ = conn.as_mut() => {}
+        _ = shutdown => {
+            conn.as_mut().graceful_shutdown();
+            let _ = conn.await;
+        }
+    }
 }
 
 /// The gRPC listener's connections: at most `max_connections` open (one beyond is closed at

@@ -24,8 +24,9 @@ async fn main() -> std::process::ExitCode {
             None => cli.config,
         };
         let running = crm_server::start(config).await?;
+        let scheme = if running.tls { "https" } else { "http" };
         println!(
-            "crm-server: dashboard http://{0}/  REST http://{0}/api/v1  gRPC http://{1}",
+            "crm-server: dashboard {scheme}://{0}/  REST {scheme}://{0}/api/v1  gRPC {scheme}://{1}",
             running.http_addr, running.grpc_addr
         );
         running.wait().await

@@ -1,7 +1,8 @@
 //! The dashboard's pages (`web/`): one HTML shell, a stylesheet and ES modules, compiled into
 //! the binary so the coordinator serves them with no network and no build step. The shell is
 //! answered for every page path; a run that does not exist, or a path that is no page, gets
-//! status 404 and the shell draws a not-found page.
+//! status 404 and the shell draws a not-found page. With tokens configured the shell is the
+//! login page too: it holds no data, and a run page does not look its run up.
 
 use std::sync::Arc;
 
@@ -99,11 +100,19 @@ async fn page() -> Response {
     shell(StatusCode::OK)
 }
 
+/// Whether a page may say if its run or sweep exists: only on an open coordinator (with
+/// tokens, the page is answered before any token is seen, so it tells nothing; the page's
+/// own API calls say not found).
+fn may_look(state: &AppState) -> bool {
+    !state.tokens.enabled()
+}
+
 async fn run_page(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
-    let found = match id.parse::<i64>() {
-        Ok(id) if id > 0 => state.store.job(id).await.is_ok_and(|j| j.kind == "train"),
-        _ => false,
-    };
+    let found = !may_look(&state)
+        || match id.parse::<i64>() {
+            Ok(id) if id > 0 => state.store.job(id).await.is_ok_and(|j| j.kind == "train"),
+            _ => false,
+        };
     shell(if found {
         StatusCode::OK
     } else {
@@ -112,10 +121,11 @@ async fn run_page(State(state): State<Arc<AppState>>, Path(id): Path<String>) ->
 }
 
 async fn sweep_page(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
-    let found = match id.parse::<i64>() {
-        Ok(id) if id > 0 => state.store.sweep(id).await.is_ok(),
-        _ => false,
-    };
+    let found = !may_look(&state)
+        || match id.parse::<i64>() {
+            Ok(id) if id > 0 => state.store.sweep(id).await.is_ok(),
+            _ => false,
+        };
     shell(if found {
         StatusCode::OK
     } else {

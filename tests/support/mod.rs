@@ -100,13 +100,19 @@ pub fn start_server_with(data: &Path, extra: &[&str], env: &[(&str, &Path)]) -> 
     let http = words
         .iter()
         .find(|w| w.ends_with("/api/v1"))
-        .and_then(|w| w.strip_prefix("http://"))
+        .and_then(|w| {
+            w.strip_prefix("http://")
+                .or_else(|| w.strip_prefix("https://"))
+        })
         .and_then(|w| w.strip_suffix("/api/v1"))
         .unwrap_or_else(|| panic!("no REST address in {line:?}"))
         .to_string();
     let grpc = words
         .last()
-        .and_then(|w| w.strip_prefix("http://"))
+        .and_then(|w| {
+            w.strip_prefix("http://")
+                .or_else(|| w.strip_prefix("https://"))
+        })
         .unwrap_or_else(|| panic!("no gRPC address in {line:?}"))
         .to_string();
     Server {
@@ -259,8 +265,13 @@ fn dechunk(mut data: &[u8]) -> Vec<u8> {
     }
 }
 
+/// The token the end-to-end tests start token-guarded coordinators with. Reads send it
+/// always: a coordinator without tokens is open and ignores it.
+pub const TOKEN: &str = "s3cret";
+
+/// `GET path` (with [`TOKEN`]); any status but 200 fails the test.
 pub fn get(addr: &str, path: &str) -> Value {
-    let reply = http(addr, "GET", path, None, None);
+    let reply = http(addr, "GET", path, None, Some(TOKEN));
     assert_eq!(
         reply.status,
         200,
@@ -342,7 +353,7 @@ pub fn recording_status(addr: &str, id: i64) -> u16 {
         "GET",
         &format!("/api/v1/jobs/{id}/recording"),
         None,
-        None,
+        Some(TOKEN),
     )
     .status
 }

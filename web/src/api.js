@@ -11,6 +11,58 @@ export class ApiError extends Error {
   }
 }
 
+/** The token the dashboard holds (the login page's, or the header's token field). */
+export function storedToken() {
+  return localStorage.getItem('crm-token') || '';
+}
+
+/**
+ * Keeps the token for both ways the dashboard authenticates: the header on its own calls,
+ * and the `crm_token` cookie, which the coordinator accepts for reads only, for what cannot
+ * send a header (download links, the event stream).
+ */
+export function storeToken(token) {
+  localStorage.setItem('crm-token', token);
+  const secure = window.location.protocol === 'https:' ? '; Secure' : '';
+  const value = token ? encodeURIComponent(token) : '';
+  const expiry = token ? '' : '; Max-Age=0';
+  document.cookie = `crm_token=${value}; Path=/; SameSite=Strict${secure}${expiry}`;
+}
+
+function authHeaders(headers) {
+  const token = storedToken();
+  if (token) headers.authorization = `Bearer ${token}`;
+  return headers;
+}
+
+let loginShown = false;
+
+/** The login page: the coordinator asked for a token this dashboard does not hold. */
+export function showLogin(message) {
+  if (loginShown) return;
+  loginShown = true;
+  const main = document.getElementById('main');
+  const input = el('input', {
+    id: 'login-token', type: 'password', autocomplete: 'current-password', required: true,
+    placeholder: 'read token',
+  });
+  const form = el('form', {
+    class: 'login',
+    onsubmit: (e) => {
+      e.preventDefault();
+      storeToken(input.value.trim());
+      window.location.reload();
+    },
+  },
+  el('h1', {}, 'Sign in'),
+  el('p', {}, message),
+  el('label', {}, 'Token ', input),
+  el('button', { type: 'submit' }, 'Sign in'));
+  main.replaceChildren(form);
+  document.title = 'Sign in · crm-grasp';
+  input.focus();
+}
+
 async function parse(response) {
   const text = await response.text();
   let body = null;
@@ -19,25 +71,28 @@ async function parse(response) {
   } catch {
     body = { error: { message: text.slice(0, 200) } };
   }
+  if (response.status === 401) {
+    showLogin(storedToken()
+      ? 'The coordinator did not accept this dashboard\'s token. Enter a token with the read scope.'
+      : 'This coordinator needs a token. Enter a token with the read scope.');
+  }
   if (!response.ok) throw new ApiError(response.status, body);
   return body;
 }
 
 export async function getJson(path) {
-  return parse(await fetch(path, { headers: { accept: 'application/json' } }));
+  return parse(await fetch(path, { headers: authHeaders({ accept: 'application/json' }) }));
 }
 
 export async function getText(path) {
-  const response = await fetch(path);
+  const response = await fetch(path, { headers: authHeaders({}) });
   if (!response.ok) await parse(response);
   return response.text();
 }
 
 /** POST (or another method) with the bearer token from the header's token field. */
 export async function send(method, path, body) {
-  const headers = { 'content-type': 'application/json' };
-  const token = localStorage.getItem('crm-token');
-  if (token) headers.authorization = `Bearer ${token}`;
+  const headers = authHeaders({ 'content-type': 'application/json' });
   return parse(await fetch(path, {
     method,
     headers,
@@ -47,9 +102,7 @@ export async function send(method, path, body) {
 
 /** POST raw bytes (a file) with the bearer token; answers the JSON body. */
 export async function sendBytes(method, path, bytes) {
-  const headers = { 'content-type': 'application/octet-stream' };
-  const token = localStorage.getItem('crm-token');
-  if (token) headers.authorization = `Bearer ${token}`;
+  const headers = authHeaders({ 'content-type': 'application/octet-stream' });
   return parse(await fetch(path, { method, headers, body: bytes }));
 }
 

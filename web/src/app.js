@@ -1,6 +1,6 @@
 // The dashboard's entry: picks the page from the path, keeps the token field and the
 // workers count in the header.
-import { getJson, notFound, onChange } from './api.js';
+import { getJson, notFound, onChange, storeToken, storedToken } from './api.js';
 import { renderJobs } from './jobs.js';
 import { renderRun } from './run.js';
 import { renderCompare } from './compare.js';
@@ -12,8 +12,10 @@ const main = document.getElementById('main');
 const path = window.location.pathname.replace(/\/+$/, '') || '/';
 
 const token = document.getElementById('token');
-token.value = localStorage.getItem('crm-token') || '';
-token.addEventListener('change', () => localStorage.setItem('crm-token', token.value.trim()));
+token.value = storedToken();
+// The cookie follows the stored token (a dashboard signed in before cookies existed).
+if (token.value && !document.cookie.includes('crm_token=')) storeToken(token.value);
+token.addEventListener('change', () => storeToken(token.value.trim()));
 
 async function workers() {
   try {

@@ -54,6 +54,9 @@ enum Command {
     /// Checkpoints: what one is and how it was made.
     #[command(subcommand)]
     Checkpoint(commands::checkpoint::CheckpointCommand),
+    /// TLS certificates to try the coordinator's TLS with.
+    #[command(subcommand)]
+    Certs(commands::certs::CertsCommand),
 }
 
 fn main() -> std::process::ExitCode {
@@ -76,6 +79,7 @@ fn main() -> std::process::ExitCode {
         Command::Bench(command) => commands::bench::run(command),
         Command::World(command) => commands::world::run(command),
         Command::Checkpoint(command) => commands::checkpoint::run(command),
+        Command::Certs(command) => commands::certs::run(command),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -71,6 +71,24 @@ impl ApiError {
         }
     }
 
+    /// A known token without the scope the call needs.
+    pub fn forbidden(scope: crate::auth::Scope) -> Self {
+        Self {
+            status: StatusCode::FORBIDDEN,
+            code: "forbidden",
+            message: format!(
+                "this token may not {}; this call needs a token with the {} scope",
+                match scope {
+                    crate::auth::Scope::Read => "read",
+                    crate::auth::Scope::Submit => "submit or change anything",
+                    crate::auth::Scope::Worker => "act as a worker",
+                },
+                scope.name()
+            ),
+            field: Some("authorization".into()),
+        }
+    }
+
     pub fn internal(err: impl std::fmt::Display) -> Self {
         tracing::error!(%err, "internal error");
         Self {

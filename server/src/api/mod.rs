@@ -9,6 +9,7 @@ mod curves;
 mod error;
 mod events;
 mod jobs;
+pub mod rate;
 mod resources;
 mod sweeps;
 mod table;
@@ -26,6 +27,7 @@ use axum::{Json, Router};
 pub use error::ApiError;
 
 use crate::AppState;
+use crate::auth::{Scope, Verdict};
 
 /// The OpenAPI document, kept beside the code and checked against the routes by a test.
 pub const OPENAPI: &str = include_str!("../../openapi.json");
@@ -72,6 +74,10 @@ pub fn router(state: Arc<AppState>) -> Router {
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),
             require_token,
+        ))
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            rate::limit,
         ));
     Router::new()
         .nest("/api/v1", api)
@@ -195,30 +201,33 @@ async fn not_found() -> ApiError {
     ApiError::not_found("route", "no such API route")
 }
 
-/// Mutating calls need the bearer token when one is configured; `HEAD` is a read, as `GET`.
+/// With tokens configured, a read (`GET`, `HEAD`) needs the read scope and anything else
+/// the submit scope (`crate::auth`): 401 without a known token, 403 with one lacking the scope.
+/// A read may carry its token in the `crm_token` cookie instead of the header.
 async fn require_token(
     State(state): State<Arc<AppState>>,
     headers: HeaderMap,
     request: Request,
     next: Next,
 ) -> Response {
-    if request.method() != Method::GET
-        && request.method() != Method::HEAD
-        && let Some(token) = &state.config.token
-        && !bearer_matches(&headers, token)
-    {
-        return ApiError::unauthorized().into_response();
+    let scope = if request.method() == Method::GET || request.method() == Method::HEAD {
+        Scope::Read
+    } else {
+        Scope::Submit
+    };
+    let header = crate::auth::bearer(headers.get("authorization").and_then(|v| v.to_str().ok()));
+    // The dashboard's pages read with the `crm_token` cookie its login sets (links, images
+    // and the event stream cannot send a header); a cookie never submits, so another site
+    // cannot make a browser change anything.
+    let cookie = match (header, scope) {
+        (None, Scope::Read) => crate::auth::cookie(&headers),
+        _ => None,
+    };
+    match state.tokens.check(header.or(cookie.as_deref()), scope) {
+        Verdict::Allowed => next.run(request).await,
+        Verdict::Unauthenticated => ApiError::unauthorized().into_response(),
+        Verdict::Forbidden => ApiError::forbidden(scope).into_response(),
     }
-    next.run(request).await
-}
-
-/// Whether the `authorization` header carries `Bearer <token>`.
-pub fn bearer_matches(headers: &HeaderMap, token: &str) -> bool {
-    headers
-        .get("authorization")
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes()))
 }
 
 /// Whether two secrets are equal, in a time that depends on their lengths only.

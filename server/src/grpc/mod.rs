@@ -15,45 +15,58 @@ use tonic::service::interceptor::InterceptedService;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::AppState;
-use crate::store::{NewCheckpoint, StoreError};
+use crate::auth::{Scope, Tokens, Verdict};
+use crate::secrets;
+use crate::store::{Lease, NewCheckpoint, StoreError};
 
 mod recording;
 
 /// Bytes per checkpoint chunk sent to workers.
 pub const CHUNK: usize = 256 * 1024;
 
-/// Refuses calls without the configured bearer token.
+/// Refuses calls without a token holding `scope` (`crate::auth`): `Unauthenticated` without a
+/// known token, `PermissionDenied` with one lacking the scope.
 #[derive(Clone)]
-pub struct TokenCheck(Option<Arc<str>>);
+pub struct TokenCheck {
+    tokens: Arc<Tokens>,
+    scope: Scope,
+}
 
 impl TokenCheck {
-    pub fn new(token: Option<&str>) -> Self {
-        Self(token.map(Arc::from))
+    pub fn new(tokens: Tokens, scope: Scope) -> Self {
+        Self {
+            tokens: Arc::new(tokens),
+            scope,
+        }
     }
 }
 
 impl tonic::service::Interceptor for TokenCheck {
     fn call(&mut self, request: Request<()>) -> Result<Request<()>, Status> {
-        if let Some(token) = &self.0 {
-            let given = request
+        let given = crate::auth::bearer(
+            request
                 .metadata()
                 .get("authorization")
-                .and_then(|v| v.to_str().ok())
-                .and_then(|v| v.strip_prefix("Bearer "));
-            if !given.is_some_and(|g| crate::api::constant_time_eq(g.as_bytes(), token.as_bytes()))
-            {
-                return Err(Status::unauthenticated("missing or wrong bearer token"));
+                .and_then(|v| v.to_str().ok()),
+        );
+        match self.tokens.check(given, self.scope) {
+            Verdict::Allowed => Ok(request),
+            Verdict::Unauthenticated => {
+                Err(Status::unauthenticated("missing or wrong bearer token"))
             }
+            Verdict::Forbidden => Err(Status::permission_denied(format!(
+                "this token lacks the {} scope",
+                self.scope.name()
+            ))),
         }
-        Ok(request)
     }
 }
 
-/// The coordinator service with its token check.
+/// The coordinator service with its token check (the worker scope).
 pub fn service(
     state: Arc<AppState>,
 ) -> InterceptedService<CoordinatorServer<CoordinatorService>, TokenCheck> {
-    let check = TokenCheck::new(state.config.token.as_deref());
+    let check = TokenCheck::new(state.tokens.clone(), Scope::Worker);
     let max = (CHUNK * 4).max(4 << 20);
     InterceptedService::new(
         CoordinatorServer::new(CoordinatorService { state })
@@ -83,12 +96,38 @@ impl CoordinatorService {
         i64::from(self.state.config.lease_ttl_s) * 1000
     }
 
-    async fn require_lease(&self, worker: &str, job: i64) -> Result<(), Status> {
-        if self.state.store.holds(worker, job).await.map_err(status)? {
+    /// Refuses a call about `job` unless `token` is its current lease's secret and
+    /// `worker` holds that lease (a stale lease's token, or another worker's, is refused).
+    async fn require_lease(&self, worker: &str, job: i64, token: &str) -> Result<(), Status> {
+        let hash = secrets::hash(token);
+        let lease = Lease {
+            worker,
+            job,
+            hash: &hash,
+        };
+        if self.state.store.holds(lease).await.map_err(status)? {
             Ok(())
         } else {
             Err(Status::failed_precondition(format!(
-                "worker {worker} does not hold job {job}"
+                "worker {worker} does not hold job {job} under this lease token"
+            )))
+        }
+    }
+
+    /// Refuses a call naming `worker` unless `secret` is the one it was given at registration.
+    async fn require_worker(&self, worker: &str, secret: &str) -> Result<(), Status> {
+        let hash = secrets::hash(secret);
+        if self
+            .state
+            .store
+            .worker_secret_matches(worker, &hash)
+            .await
+            .map_err(status)?
+        {
+            Ok(())
+        } else {
+            Err(Status::permission_denied(format!(
+                "worker_secret: not the secret worker {worker} was registered with"
             )))
         }
     }
@@ -103,10 +142,16 @@ impl Coordinator for CoordinatorService {
         let r = request.into_inner();
         crm_api::check_name(&r.name)
             .map_err(|why| Status::invalid_argument(format!("name: {why}")))?;
+        let secret = secrets::new_secret().map_err(|e| Status::internal(e.to_string()))?;
         let worker = self
             .state
             .store
-            .register_worker(&r.name, i64::from(r.cores), &r.version)
+            .register_worker(
+                &r.name,
+                i64::from(r.cores),
+                &r.version,
+                &secrets::hash(&secret),
+            )
             .await
             .map_err(status)?;
         tracing::info!(worker = worker.id, name = worker.name, "worker registered");
@@ -114,6 +159,7 @@ impl Coordinator for CoordinatorService {
             worker_id: worker.id,
             heartbeat_interval_s: self.state.config.heartbeat_interval_s,
             lease_ttl_s: self.state.config.lease_ttl_s,
+            worker_secret: secret,
         }))
     }
 
@@ -121,9 +167,14 @@ impl Coordinator for CoordinatorService {
         &self,
         request: Request<pb::LeaseRequest>,
     ) -> Result<Response<pb::LeaseReply>, Status> {
-        let worker = request.into_inner().worker_id;
+        let r = request.into_inner();
+        let worker = r.worker_id;
+        self.require_worker(&worker, &r.worker_secret).await?;
         let store = &self.state.store;
-        let Some(job) = store.lease(&worker, self.ttl_ms()).await.map_err(status)? else {
+        let token = secrets::new_secret().map_err(|e| Status::internal(e.to_string()))?;
+        let hash = secrets::hash(&token);
+        let leased = store.lease(&worker, &hash, self.ttl_ms()).await;
+        let Some(job) = leased.map_err(status)? else {
             return Ok(Response::new(pb::LeaseReply { job: None }));
         };
         let checkpoint_id = match job.kind.as_str() {
@@ -149,6 +200,7 @@ impl Coordinator for CoordinatorService {
                 spec_json: job.spec,
                 checkpoint_id,
                 attempt: u32::try_from(job.attempts - 1).unwrap_or(0),
+                lease_token: token,
             }),
         }))
     }
@@ -158,10 +210,17 @@ impl Coordinator for CoordinatorService {
         request: Request<pb::HeartbeatRequest>,
     ) -> Result<Response<pb::HeartbeatReply>, Status> {
         let r = request.into_inner();
+        self.require_worker(&r.worker_id, &r.worker_secret).await?;
+        let hash = secrets::hash(&r.lease_token);
+        let lease = Lease {
+            worker: &r.worker_id,
+            job: r.job_id,
+            hash: &hash,
+        };
         let held = self
             .state
             .store
-            .heartbeat(&r.worker_id, r.job_id, self.ttl_ms())
+            .heartbeat(lease, self.ttl_ms())
             .await
             .map_err(status)?;
         Ok(Response::new(pb::HeartbeatReply { stop: !held }))
@@ -174,19 +233,22 @@ impl Coordinator for CoordinatorService {
         let mut stream = request.into_inner();
         let store = &self.state.store;
         let mut accepted = 0;
-        let mut leased: Option<(String, i64, u64)> = None;
+        let mut leased: Option<(String, i64, String, u64)> = None;
         while let Some(message) = stream.message().await? {
             let key = (message.worker_id.clone(), message.job_id);
             let budget = match &leased {
-                Some((w, j, budget)) if (w, *j) == (&key.0, key.1) => *budget,
+                Some((w, j, t, budget)) if (w, *j, t) == (&key.0, key.1, &message.lease_token) => {
+                    *budget
+                }
                 _ => {
-                    self.require_lease(&key.0, key.1).await?;
+                    self.require_lease(&key.0, key.1, &message.lease_token)
+                        .await?;
                     let job = store.job(key.1).await.map_err(status)?;
                     let budget = serde_json::from_str::<serde_json::Value>(&job.spec)
                         .ok()
                         .and_then(|s| s["steps"].as_u64().or(s["episodes"].as_u64()))
                         .unwrap_or(1);
-                    leased = Some((key.0.clone(), key.1, budget));
+                    leased = Some((key.0.clone(), key.1, message.lease_token.clone(), budget));
                     budget
                 }
             };
@@ -262,7 +324,8 @@ impl Coordinator for CoordinatorService {
             }) => meta,
             _ => return Err(Status::invalid_argument("the first chunk must carry meta")),
         };
-        self.require_lease(&meta.worker_id, meta.job_id).await?;
+        self.require_lease(&meta.worker_id, meta.job_id, &meta.lease_token)
+            .await?;
         if crm_api::Algorithm::parse(&meta.algorithm).is_none() {
             return Err(Status::invalid_argument(
                 "meta.algorithm: unknown algorithm",
@@ -393,11 +456,7 @@ impl Coordinator for CoordinatorService {
         request: Request<pb::DownloadRequest>,
     ) -> Result<Response<Self::DownloadCheckpointStream>, Status> {
         let r = request.into_inner();
-        self.state
-            .store
-            .worker(&r.worker_id)
-            .await
-            .map_err(status)?;
+        self.require_worker(&r.worker_id, &r.worker_secret).await?;
         let row = self
             .state
             .store
@@ -414,6 +473,7 @@ impl Coordinator for CoordinatorService {
                 steps: row.steps as u64,
                 algorithm: row.algorithm,
                 size: bytes.len() as u64,
+                lease_token: String::new(),
             })),
         };
         let chunks: Vec<Result<pb::CheckpointChunk, Status>> = std::iter::once(Ok(meta))
@@ -434,10 +494,18 @@ impl Coordinator for CoordinatorService {
         if serde_json::from_str::<serde_json::Value>(&r.result_json).is_err() {
             return Err(Status::invalid_argument("result_json: not JSON"));
         }
+        self.require_lease(&r.worker_id, r.job_id, &r.lease_token)
+            .await?;
+        let hash = secrets::hash(&r.lease_token);
+        let lease = Lease {
+            worker: &r.worker_id,
+            job: r.job_id,
+            hash: &hash,
+        };
         let evaluation = self
             .state
             .store
-            .succeed(&r.worker_id, r.job_id, &r.result_json)
+            .succeed(lease, &r.result_json)
             .await
             .map_err(status)?;
         tracing::info!(job = r.job_id, worker = r.worker_id, "job succeeded");
@@ -453,9 +521,17 @@ impl Coordinator for CoordinatorService {
         request: Request<pb::FailRequest>,
     ) -> Result<Response<pb::CompleteReply>, Status> {
         let r = request.into_inner();
+        self.require_lease(&r.worker_id, r.job_id, &r.lease_token)
+            .await?;
+        let hash = secrets::hash(&r.lease_token);
+        let lease = Lease {
+            worker: &r.worker_id,
+            job: r.job_id,
+            hash: &hash,
+        };
         self.state
             .store
-            .finish(&r.worker_id, r.job_id, "failed", None, Some(&r.message))
+            .finish(lease, "failed", None, Some(&r.message))
             .await
             .map_err(status)?;
         tracing::warn!(

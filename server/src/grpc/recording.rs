@@ -22,7 +22,8 @@ impl CoordinatorService {
             }) => meta,
             _ => return Err(Status::invalid_argument("the first chunk must carry meta")),
         };
-        self.require_lease(&meta.worker_id, meta.job_id).await?;
+        self.require_lease(&meta.worker_id, meta.job_id, &meta.lease_token)
+            .await?;
         if meta.size == 0 || meta.size > MAX_APPEND_BYTES {
             return Err(Status::invalid_argument(format!(
                 "meta.size: 1 to {MAX_APPEND_BYTES} bytes"

@@ -133,6 +133,14 @@ pub enum StoreError {
 
 pub type Result<T, E = StoreError> = std::result::Result<T, E>;
 
+/// A worker's claim on a job: the worker, the job, and the hash of the lease's secret.
+#[derive(Clone, Copy, Debug)]
+pub struct Lease<'a> {
+    pub worker: &'a str,
+    pub job: i64,
+    pub hash: &'a str,
+}
+
 /// The store: a connection pool and the checkpoint folder.
 #[derive(Clone)]
 pub struct Store {
@@ -198,7 +206,15 @@ impl Store {
 
     // ---- workers ----
 
-    pub async fn register_worker(&self, name: &str, cores: i64, version: &str) -> Result<Worker> {
+    /// Registers a worker; `secret_hash` is the hash of the secret it was given
+    /// ([`crate::secrets`]), which every later call naming the worker must match.
+    pub async fn register_worker(
+        &self,
+        name: &str,
+        cores: i64,
+        version: &str,
+        secret_hash: &str,
+    ) -> Result<Worker> {
         let now = now_ms();
         let count: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM workers")
             .fetch_one(&self.pool)
@@ -207,8 +223,8 @@ impl Store {
         static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
         let serial = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let id = format!("w{}-{:x}{serial:x}", count + 1, now & 0xFFFF_FFFF);
-        sqlx::query("INSERT INTO workers (id, name, cores, version, registered_at, last_heartbeat) VALUES (?, ?, ?, ?, ?, ?)")
-            .bind(&id).bind(name).bind(cores).bind(version).bind(now).bind(now)
+        sqlx::query("INSERT INTO workers (id, name, cores, version, registered_at, last_heartbeat, secret_hash) VALUES (?, ?, ?, ?, ?, ?, ?)")
+            .bind(&id).bind(name).bind(cores).bind(version).bind(now).bind(now).bind(secret_hash)
             .execute(&self.pool)
             .await?;
         self.worker(&id).await
@@ -220,6 +236,19 @@ impl Store {
             .fetch_optional(&self.pool)
             .await?
             .ok_or(StoreError::NotFound)
+    }
+
+    /// Whether `secret_hash` is the hash of worker `id`'s secret; an unknown worker is
+    /// [`StoreError::NotFound`]. A worker registered before secrets existed has none and
+    /// matches nothing.
+    pub async fn worker_secret_matches(&self, id: &str, secret_hash: &str) -> Result<bool> {
+        let stored: Option<Option<String>> =
+            sqlx::query_scalar("SELECT secret_hash FROM workers WHERE id = ?")
+                .bind(id)
+                .fetch_optional(&self.pool)
+                .await?;
+        let stored = stored.ok_or(StoreError::NotFound)?;
+        Ok(stored.is_some_and(|s| crate::secrets::same(&s, secret_hash)))
     }
 
     pub async fn workers(&self) -> Result<Vec<Worker>> {
@@ -348,16 +377,19 @@ impl Store {
 
     /// Leases the oldest queued job to `worker` for `ttl_ms`; none while `worker` holds a
     /// lease already (one job per worker: a second lease would only starve the first).
-    pub async fn lease(&self, worker: &str, ttl_ms: i64) -> Result<Option<Job>> {
+    /// Leases the oldest queued job to `worker`, unless it holds one; `lease_hash` is the hash
+    /// of the lease's secret, which every call about the job must then match.
+    pub async fn lease(&self, worker: &str, lease_hash: &str, ttl_ms: i64) -> Result<Option<Job>> {
         self.touch_worker(worker).await?;
         self.requeue_expired().await?;
         let now = now_ms();
         let id: Option<i64> = sqlx::query_scalar(
-            "UPDATE jobs SET state = 'running', worker_id = ?1, attempts = attempts + 1, lease_expires_at = ?2, started_at = COALESCE(started_at, ?3) WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY id LIMIT 1) AND NOT EXISTS (SELECT 1 FROM jobs WHERE worker_id = ?1 AND state = 'running') RETURNING id",
+            "UPDATE jobs SET state = 'running', worker_id = ?1, lease_hash = ?4, attempts = attempts + 1, lease_expires_at = ?2, started_at = COALESCE(started_at, ?3) WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY id LIMIT 1) AND NOT EXISTS (SELECT 1 FROM jobs WHERE worker_id = ?1 AND state = 'running') RETURNING id",
         )
         .bind(worker)
         .bind(now + ttl_ms)
         .bind(now)
+        .bind(lease_hash)
         .fetch_optional(&self.pool)
         .await?;
         match id {
@@ -366,29 +398,31 @@ impl Store {
         }
     }
 
-    /// Extends a lease; `false` when the job is no longer this worker's (cancelled,
-    /// re-leased, finished).
-    pub async fn heartbeat(&self, worker: &str, job: i64, ttl_ms: i64) -> Result<bool> {
-        self.touch_worker(worker).await?;
-        if job == 0 {
+    /// Extends a lease; `false` when the job is no longer this lease's (cancelled, re-leased,
+    /// finished).
+    pub async fn heartbeat(&self, lease: Lease<'_>, ttl_ms: i64) -> Result<bool> {
+        self.touch_worker(lease.worker).await?;
+        if lease.job == 0 {
             return Ok(true);
         }
-        let done = sqlx::query("UPDATE jobs SET lease_expires_at = ? WHERE id = ? AND worker_id = ? AND state = 'running'")
+        let done = sqlx::query("UPDATE jobs SET lease_expires_at = ? WHERE id = ? AND worker_id = ? AND lease_hash = ? AND state = 'running'")
             .bind(now_ms() + ttl_ms)
-            .bind(job)
-            .bind(worker)
+            .bind(lease.job)
+            .bind(lease.worker)
+            .bind(lease.hash)
             .execute(&self.pool)
             .await?;
         Ok(done.rows_affected() == 1)
     }
 
-    /// Whether `worker` holds the lease on `job`.
-    pub async fn holds(&self, worker: &str, job: i64) -> Result<bool> {
+    /// Whether the lease is the job's current one.
+    pub async fn holds(&self, lease: Lease<'_>) -> Result<bool> {
         let held: Option<i64> = sqlx::query_scalar(
-            "SELECT id FROM jobs WHERE id = ? AND worker_id = ? AND state = 'running'",
+            "SELECT id FROM jobs WHERE id = ? AND worker_id = ? AND lease_hash = ? AND state = 'running'",
         )
-        .bind(job)
-        .bind(worker)
+        .bind(lease.job)
+        .bind(lease.worker)
+        .bind(lease.hash)
         .fetch_optional(&self.pool)
         .await?;
         Ok(held.is_some())
@@ -472,17 +506,16 @@ impl Store {
             .collect())
     }
 
-    /// Ends a job the worker holds: `state` is `succeeded` or `failed`.
+    /// Ends a job under its current lease: `state` is `succeeded` or `failed`.
     pub async fn finish(
         &self,
-        worker: &str,
-        job: i64,
+        lease: Lease<'_>,
         state: &str,
         result: Option<&str>,
         error: Option<&str>,
     ) -> Result<()> {
         let mut tx = self.write_tx().await?;
-        finish_row(&mut tx, worker, job, state, result, error).await?;
+        finish_row(&mut tx, lease, state, result, error).await?;
         tx.commit().await?;
         Ok(())
     }
@@ -582,19 +615,18 @@ impl Store {
 /// (or not found).
 async fn finish_row(
     tx: &mut sqlx::SqliteConnection,
-    worker: &str,
-    job: i64,
+    lease: Lease<'_>,
     state: &str,
     result: Option<&str>,
     error: Option<&str>,
 ) -> Result<()> {
-    let done = sqlx::query("UPDATE jobs SET state = ?, result = ?, error = ?, finished_at = ?, lease_expires_at = NULL, progress = CASE WHEN ? = 'succeeded' THEN 1.0 ELSE progress END WHERE id = ? AND worker_id = ? AND state = 'running'")
-        .bind(state).bind(result).bind(error).bind(now_ms()).bind(state).bind(job).bind(worker)
+    let done = sqlx::query("UPDATE jobs SET state = ?, result = ?, error = ?, finished_at = ?, lease_expires_at = NULL, progress = CASE WHEN ? = 'succeeded' THEN 1.0 ELSE progress END WHERE id = ? AND worker_id = ? AND lease_hash = ? AND state = 'running'")
+        .bind(state).bind(result).bind(error).bind(now_ms()).bind(state).bind(lease.job).bind(lease.worker).bind(lease.hash)
         .execute(&mut *tx)
         .await?;
     if done.rows_affected() == 0 {
         let now: Option<String> = sqlx::query_scalar("SELECT state FROM jobs WHERE id = ?")
-            .bind(job)
+            .bind(lease.job)
             .fetch_optional(&mut *tx)
             .await?;
         return Err(now.map_or(StoreError::NotFound, StoreError::Conflict));

@@ -7,7 +7,8 @@ use serde::Serialize;
 use sqlx::FromRow;
 
 use super::{
-    JOB_COLUMNS, Job, NewJob, Result, Store, StoreError, as_json, finish_row, insert_job, now_ms,
+    JOB_COLUMNS, Job, Lease, NewJob, Result, Store, StoreError, as_json, finish_row, insert_job,
+    now_ms,
 };
 
 /// A sweep as stored.
@@ -91,9 +92,10 @@ impl Store {
     /// Ends a job the worker holds as succeeded with `result`. A training job of a sweep
     /// whose request has an evaluation spec queues the evaluation of its final checkpoint
     /// (`result.checkpoint_id`) in the same transaction; returns that job's id.
-    pub async fn succeed(&self, worker: &str, job: i64, result: &str) -> Result<Option<i64>> {
+    pub async fn succeed(&self, lease: Lease<'_>, result: &str) -> Result<Option<i64>> {
+        let job = lease.job;
         let mut tx = self.write_tx().await?;
-        finish_row(&mut tx, worker, job, "succeeded", Some(result), None).await?;
+        finish_row(&mut tx, lease, "succeeded", Some(result), None).await?;
         let (kind, sweep): (String, Option<i64>) =
             sqlx::query_as("SELECT kind, sweep_id FROM jobs WHERE id = ?")
                 .bind(job)

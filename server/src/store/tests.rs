@@ -114,22 +114,114 @@ async fn a_worker_holds_one_lease_at_a_time() {
     let dir = temp_dir("one-lease");
     let store = Store::open(&dir).await.expect("open");
     let worker = store
-        .register_worker("w", 2, "test")
+        .register_worker("w", 2, "test", "secret-w")
         .await
         .expect("worker")
         .id;
     let other = store
-        .register_worker("v", 2, "test")
+        .register_worker("v", 2, "test", "secret-v")
         .await
         .expect("worker")
         .id;
     let first = store.create_job(new_job("{}")).await.expect("job").id;
     let second = store.create_job(new_job("{}")).await.expect("job").id;
-    let leased = store.lease(&worker, 60_000).await.expect("lease");
+    let leased = store
+        .lease(&worker, "lease-a", 60_000)
+        .await
+        .expect("lease");
     assert_eq!(leased.map(|j| j.id), Some(first));
-    assert!(store.lease(&worker, 60_000).await.expect("lease").is_none());
-    let leased = store.lease(&other, 60_000).await.expect("lease");
+    assert!(
+        store
+            .lease(&worker, "lease-a", 60_000)
+            .await
+            .expect("lease")
+            .is_none()
+    );
+    let leased = store.lease(&other, "lease-b", 60_000).await.expect("lease");
     assert_eq!(leased.map(|j| j.id), Some(second));
+    store.close().await;
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A lease is its secret: a worker whose lease expired and whose job went to another worker
+/// can no longer heartbeat, report or finish it, and a worker's secret matches only itself.
+#[tokio::test]
+async fn a_stale_or_foreign_lease_is_refused() {
+    let dir = temp_dir("stale-lease");
+    let store = Store::open(&dir).await.expect("open");
+    let old = store
+        .register_worker("old", 2, "test", "secret-old")
+        .await
+        .expect("worker")
+        .id;
+    let new = store
+        .register_worker("new", 2, "test", "secret-new")
+        .await
+        .expect("worker")
+        .id;
+    assert!(
+        store
+            .worker_secret_matches(&old, "secret-old")
+            .await
+            .expect("query")
+    );
+    assert!(
+        !store
+            .worker_secret_matches(&old, "secret-new")
+            .await
+            .expect("query")
+    );
+    assert!(matches!(
+        store.worker_secret_matches("nobody", "x").await,
+        Err(StoreError::NotFound)
+    ));
+    let job = store.create_job(new_job("{}")).await.expect("job").id;
+    let leased = store.lease(&old, "first", 0).await.expect("lease");
+    assert_eq!(leased.map(|j| j.id), Some(job));
+    let first = Lease {
+        worker: &old,
+        job,
+        hash: "first",
+    };
+    assert!(store.holds(first).await.expect("holds"));
+    let forged = Lease {
+        worker: &new,
+        job,
+        hash: "first",
+    };
+    assert!(
+        !store.holds(forged).await.expect("holds"),
+        "another worker with the token"
+    );
+    let guessed = Lease {
+        worker: &old,
+        job,
+        hash: "guess",
+    };
+    assert!(
+        !store.holds(guessed).await.expect("holds"),
+        "the worker without the token"
+    );
+    // The lease expires (ttl 0) and the job goes to the other worker under a new secret.
+    std::thread::sleep(std::time::Duration::from_millis(5));
+    let leased = store.lease(&new, "second", 60_000).await.expect("lease");
+    assert_eq!(leased.map(|j| j.id), Some(job));
+    assert!(!store.holds(first).await.expect("holds"));
+    assert!(!store.heartbeat(first, 60_000).await.expect("heartbeat"));
+    assert!(matches!(
+        store.succeed(first, "{}").await,
+        Err(StoreError::Conflict(state)) if state == "running"
+    ));
+    let second = Lease {
+        worker: &new,
+        job,
+        hash: "second",
+    };
+    store
+        .succeed(second, "{}")
+        .await
+        .expect("the current lease finishes");
+    assert_eq!(store.job(job).await.expect("job").state, "succeeded");
     store.close().await;
     std::fs::remove_dir_all(&dir).ok();
 }

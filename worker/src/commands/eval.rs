@@ -44,6 +44,10 @@ pub struct EvalArgs {
     /// The coordinator's bearer token, for `--coordinator`.
     #[arg(long, env = "CRM_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
+    /// The CA certificate (PEM) of an `https://` coordinator with a private CA (`crm certs
+    /// dev` writes `ca.pem`); without it the system's roots are used.
+    #[arg(long, value_name = "FILE")]
+    pub ca: Option<PathBuf>,
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
@@ -95,7 +99,7 @@ fn remote(url: &str, args: &EvalArgs, spec: &EvalSpec) -> anyhow::Result<(EvalRe
     if let Some((_, flag)) = local_only.iter().find(|(set, _)| *set) {
         bail!("{flag}: not available with --coordinator (workers run the built-in settings)");
     }
-    let rest = Rest::new(url, args.token.clone())?;
+    let rest = Rest::new(url, args.token.clone(), args.ca.as_deref())?;
     let checkpoint_id = rest.upload_checkpoint(&args.checkpoint)?;
     let mut job = serde_json::to_value(spec)?;
     job["kind"] = Value::from("eval");

@@ -2,6 +2,7 @@
 
 pub mod bench;
 mod bench_hold;
+pub mod certs;
 pub mod checkpoint;
 pub mod eval;
 pub mod oracle;

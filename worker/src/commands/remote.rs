@@ -16,12 +16,30 @@ pub struct Rest {
 }
 
 impl Rest {
-    pub fn new(base: &str, token: Option<String>) -> anyhow::Result<Self> {
+    /// A client of the API at `base`; an `https://` one is checked against `ca` (a PEM file)
+    /// or, without it, the built-in web roots.
+    pub fn new(base: &str, token: Option<String>, ca: Option<&Path>) -> anyhow::Result<Self> {
         let base = base.trim_end_matches('/').to_string();
         if !(base.starts_with("http://") || base.starts_with("https://")) {
             bail!("--coordinator: {base:?} is not an http:// URL of the coordinator's REST API");
         }
-        let config = ureq::Agent::config_builder()
+        let mut config = ureq::Agent::config_builder();
+        if let Some(path) = ca {
+            let pem = std::fs::read(path)
+                .with_context(|| format!("--ca {}: cannot read it", path.display()))?;
+            let certs = ureq::tls::parse_pem(&pem)
+                .filter_map(|item| match item {
+                    Ok(ureq::tls::PemItem::Certificate(cert)) => Some(cert),
+                    _ => None,
+                })
+                .collect::<Vec<_>>();
+            if certs.is_empty() {
+                bail!("--ca {}: no PEM certificate in it", path.display());
+            }
+            let roots = ureq::tls::RootCerts::new_with_certs(&certs);
+            config = config.tls_config(ureq::tls::TlsConfig::builder().root_certs(roots).build());
+        }
+        let config = config
             .http_status_as_error(false)
             .timeout_global(Some(Duration::from_secs(120)))
             .build();

@@ -21,6 +21,11 @@ pub struct WorkerFlags {
     /// This worker's name (default: the host name).
     #[arg(long)]
     pub name: Option<String>,
+    /// The CA certificate (PEM) that signed the coordinator's TLS certificate, for an
+    /// `https://` coordinator with a private CA (`crm certs dev` writes `ca.pem`); without it
+    /// the system's roots are used.
+    #[arg(long, value_name = "FILE")]
+    pub ca: Option<PathBuf>,
 }
 
 impl WorkerFlags {
@@ -33,6 +38,7 @@ impl WorkerFlags {
         WorkerOptions {
             coordinator,
             token,
+            ca: self.ca.clone(),
             worlds,
             name: self.name.clone().unwrap_or_else(host_name),
             checkpoint_every_s: self.checkpoint_every_s,
@@ -87,6 +93,16 @@ pub struct ServePolicyArgs {
     /// Address to serve the Policy gRPC on.
     #[arg(long, default_value = "127.0.0.1:50052")]
     pub listen: String,
+    /// Bearer token every call must carry (`authorization: Bearer <token>`); without one the
+    /// policy answers anyone who reaches the address.
+    #[arg(long, env = "CRM_POLICY_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// PEM certificate chain: with `--tls-key`, the policy is served over TLS only.
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// PEM private key of `--tls-cert`.
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
     /// The world folder the checkpoint was trained in (default: the built-in world).
     #[arg(long, value_name = "DIR")]
     pub world: Option<PathBuf>,
@@ -98,6 +114,11 @@ pub fn up(args: UpArgs) -> anyhow::Result<()> {
         None => args.server,
     };
     config.validate()?;
+    if config.tls_cert.is_some() && args.worker.ca.is_none() {
+        anyhow::bail!(
+            "--ca: needed with --tls-cert, to check the coordinator's certificate from the local workers (`crm certs dev` writes ca.pem)"
+        );
+    }
     let workers = args
         .workers
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -119,5 +140,6 @@ pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
 
 pub fn serve_policy(args: ServePolicyArgs) -> anyhow::Result<()> {
     let env = crate::commands::EnvArgs::default().in_world(args.world);
-    policy::serve_main(&args.checkpoint, &args.listen, &env)
+    let access = policy::Access::new(args.token, args.tls_cert.zip(args.tls_key))?;
+    policy::serve_main(&args.checkpoint, &args.listen, &env, access)
 }

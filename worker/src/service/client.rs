@@ -33,14 +33,41 @@ impl tonic::service::Interceptor for AddToken {
 pub struct Client {
     pub inner: CoordinatorClient<InterceptedService<Channel, AddToken>>,
     pub worker_id: String,
+    /// The secret the coordinator gave this worker at registration.
+    pub worker_secret: String,
+    /// The secret of the job this client acts for (`Job.lease_token`; empty between jobs).
+    pub lease_token: String,
     pub heartbeat: Duration,
+}
+
+/// tonic's TLS settings for a coordinator or a policy server: `ca` (a PEM file) as the only
+/// root, or the system's roots.
+pub fn client_tls(ca: Option<&Path>) -> anyhow::Result<tonic::transport::ClientTlsConfig> {
+    let tls = tonic::transport::ClientTlsConfig::new();
+    Ok(match ca {
+        Some(path) => {
+            let pem = std::fs::read(path)
+                .with_context(|| format!("--ca {}: cannot read it", path.display()))?;
+            if !String::from_utf8_lossy(&pem).contains("-----BEGIN CERTIFICATE-----") {
+                bail!("--ca {}: no PEM certificate in it", path.display());
+            }
+            tls.ca_certificate(tonic::transport::Certificate::from_pem(pem))
+        }
+        None => tls.with_native_roots(),
+    })
 }
 
 /// Bytes per uploaded chunk.
 const CHUNK: usize = 256 * 1024;
 
 impl Client {
-    pub async fn connect(url: &str, token: Option<&str>) -> anyhow::Result<Self> {
+    /// Connects to the coordinator's gRPC at `url`; an `https://` one is checked against `ca`
+    /// (a PEM file) or, without it, the system's roots.
+    pub async fn connect(
+        url: &str,
+        token: Option<&str>,
+        ca: Option<&Path>,
+    ) -> anyhow::Result<Self> {
         let token = match token {
             Some(t) => Some(
                 format!("Bearer {t}")
@@ -49,9 +76,15 @@ impl Client {
             ),
             None => None,
         };
-        let channel = Channel::from_shared(url.to_string())
+        let mut endpoint = Channel::from_shared(url.to_string())
             .with_context(|| format!("--coordinator: {url:?} is not a URL"))?
-            .connect_timeout(Duration::from_secs(5))
+            .connect_timeout(Duration::from_secs(5));
+        if url.starts_with("https://") || ca.is_some() {
+            endpoint = endpoint
+                .tls_config(client_tls(ca)?)
+                .context("--coordinator: TLS settings")?;
+        }
+        let channel = endpoint
             .connect()
             .await
             .with_context(|| format!("connecting to {url}"))?;
@@ -60,6 +93,8 @@ impl Client {
         Ok(Self {
             inner,
             worker_id: String::new(),
+            worker_secret: String::new(),
+            lease_token: String::new(),
             heartbeat: Duration::from_secs(5),
         })
     }
@@ -72,6 +107,7 @@ impl Client {
             .download_checkpoint(pb::DownloadRequest {
                 worker_id: self.worker_id.clone(),
                 checkpoint_id: id,
+                worker_secret: self.worker_secret.clone(),
             })
             .await?
             .into_inner();
@@ -112,6 +148,7 @@ impl Client {
                 worker_id: self.worker_id.clone(),
                 size: bytes.len() as u64,
                 episodes,
+                lease_token: self.lease_token.clone(),
             })),
         };
         let chunks: Vec<pb::RecordingChunk> = std::iter::once(meta)
@@ -143,6 +180,7 @@ impl Client {
                 steps,
                 algorithm: algorithm.to_string(),
                 size: bytes.len() as u64,
+                lease_token: self.lease_token.clone(),
             })),
         };
         let chunks: Vec<pb::CheckpointChunk> = std::iter::once(meta)
@@ -165,6 +203,7 @@ impl Client {
                 worker_id: self.worker_id.clone(),
                 job_id: job,
                 result_json: result.to_string(),
+                lease_token: self.lease_token.clone(),
             })
             .await?;
         Ok(())
@@ -177,6 +216,7 @@ impl Client {
                 worker_id: self.worker_id.clone(),
                 job_id: job,
                 message: message.to_string(),
+                lease_token: self.lease_token.clone(),
             })
             .await?;
         Ok(())

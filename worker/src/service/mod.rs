@@ -23,6 +23,8 @@ pub struct WorkerOptions {
     /// The coordinator's gRPC URL, e.g. `http://127.0.0.1:50051`.
     pub coordinator: String,
     pub token: Option<String>,
+    /// The CA certificate (PEM file) of an `https://` coordinator with a private CA.
+    pub ca: Option<std::path::PathBuf>,
     pub name: String,
     /// Seconds between checkpoint uploads while training.
     pub checkpoint_every_s: u64,
@@ -38,8 +40,12 @@ pub struct WorkerOptions {
 pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
     let mut backoff = Duration::from_millis(200);
     while !stop.load(Ordering::Relaxed) {
-        let mut client = match Client::connect(&options.coordinator, options.token.as_deref()).await
-        {
+        let connected = Client::connect(
+            &options.coordinator,
+            options.token.as_deref(),
+            options.ca.as_deref(),
+        );
+        let mut client = match connected.await {
             Ok(client) => client,
             Err(err) => {
                 tracing::warn!(%err, coordinator = options.coordinator, "cannot reach the coordinator; retrying");
@@ -77,6 +83,7 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
         backoff = Duration::from_millis(200);
         tracing::info!(worker = registration.worker_id, "registered");
         client.worker_id = registration.worker_id;
+        client.worker_secret = registration.worker_secret;
         client.heartbeat = Duration::from_secs(u64::from(registration.heartbeat_interval_s.max(1)));
         loop {
             if stop.load(Ordering::Relaxed) {
@@ -86,15 +93,21 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
                 .inner
                 .lease(pb::LeaseRequest {
                     worker_id: client.worker_id.clone(),
+                    worker_secret: client.worker_secret.clone(),
                 })
                 .await;
             match lease {
                 Ok(reply) => match reply.into_inner().job {
                     Some(job) => {
                         let id = job.job_id;
-                        if let Err(err) = run::run_job(&client, &options, job).await {
+                        // The job's calls carry its lease's secret.
+                        let leased = Client {
+                            lease_token: job.lease_token.clone(),
+                            ..client.clone()
+                        };
+                        if let Err(err) = run::run_job(&leased, &options, job).await {
                             tracing::error!(job = id, err = format!("{err:#}"), "job failed");
-                            client.fail(id, &format!("{err:#}")).await.ok();
+                            leased.fail(id, &format!("{err:#}")).await.ok();
                         }
                     }
                     None => tokio::time::sleep(Duration::from_secs_f64(options.poll_s)).await,

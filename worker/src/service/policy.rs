@@ -124,7 +124,37 @@ impl Policy for PolicyService {
 }
 
 /// `crm serve-policy`'s entry: serves until ctrl-c.
-pub fn serve_main(checkpoint: &Path, listen: &str, env: &EnvArgs) -> anyhow::Result<()> {
+/// Who may call a policy server, and over what: a bearer token (none: anyone who reaches the
+/// address) and TLS (`--tls-cert`, `--tls-key`).
+pub struct Access {
+    token: Option<String>,
+    identity: Option<crm_server::tls::Identity>,
+}
+
+impl Access {
+    pub fn new(
+        token: Option<String>,
+        tls: Option<(std::path::PathBuf, std::path::PathBuf)>,
+    ) -> anyhow::Result<Self> {
+        if let Some(token) = &token
+            && (token.is_empty() || !token.bytes().all(|b| b.is_ascii_graphic()))
+        {
+            anyhow::bail!("--token: printable ASCII without spaces, not empty");
+        }
+        let identity = match tls {
+            Some((cert, key)) => Some(crm_server::tls::Identity::load(&cert, &key)?),
+            None => None,
+        };
+        Ok(Self { token, identity })
+    }
+}
+
+pub fn serve_main(
+    checkpoint: &Path,
+    listen: &str,
+    env: &EnvArgs,
+    access: Access,
+) -> anyhow::Result<()> {
     crm_server::init_logging();
     let service = PolicyService::load(checkpoint, env)?;
     let addr: std::net::SocketAddr = listen
@@ -134,12 +164,33 @@ pub fn serve_main(checkpoint: &Path, listen: &str, env: &EnvArgs) -> anyhow::Res
     runtime.block_on(async move {
         let listener = tokio::net::TcpListener::bind(addr).await?;
         let bound = listener.local_addr()?;
+        let scheme = if access.identity.is_some() {
+            "https"
+        } else {
+            "http"
+        };
         println!(
-            "crm serve-policy: gRPC Policy on http://{bound} ({})",
-            service.info.algorithm
+            "crm serve-policy: gRPC Policy on {scheme}://{bound} ({}){}",
+            service.info.algorithm,
+            if access.token.is_some() {
+                ", token required"
+            } else {
+                ""
+            }
         );
-        tonic::transport::Server::builder()
-            .add_service(service.into_server())
+        let check = crm_server::grpc::TokenCheck::new(
+            crm_server::auth::Tokens::all(access.token.as_deref()),
+            crm_server::auth::Scope::Read,
+        );
+        let mut builder = tonic::transport::Server::builder();
+        if let Some(identity) = &access.identity {
+            builder = builder.tls_config(identity.grpc())?;
+        }
+        builder
+            .add_service(tonic::service::interceptor::InterceptedService::new(
+                service.into_server(),
+                check,
+            ))
             .serve_with_incoming_shutdown(
                 tokio_stream::wrappers::TcpListenerStream::new(listener),
                 async {

@@ -45,6 +45,7 @@ impl Link {
                 worker_id: self.client.worker_id.clone(),
                 job_id: self.job,
                 body: Some(body),
+                lease_token: self.client.lease_token.clone(),
             })
             .map_err(|_| anyhow::anyhow!("the progress stream closed (lease lost?)"))
     }
@@ -69,6 +70,8 @@ pub async fn run_job(client: &Client, options: &WorkerOptions, job: pb::Job) -> 
         let request = pb::HeartbeatRequest {
             worker_id: client.worker_id.clone(),
             job_id: id,
+            worker_secret: client.worker_secret.clone(),
+            lease_token: client.lease_token.clone(),
         };
         let (period, flag) = (client.heartbeat, cancelled.clone());
         tokio::spawn(async move {

@@ -15,21 +15,22 @@ pub fn up_main(config: ServerConfig, workers: usize, options: WorkerOptions) -> 
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let result = runtime.block_on(async move {
         let running = crm_server::start(config).await?;
-        let token = running.state.config.token.clone();
+        let token = running.state.tokens.for_workers();
+        let scheme = if running.tls { "https" } else { "http" };
         println!("crm-grasp is up");
-        println!("  dashboard  http://{}/", running.http_addr);
+        println!("  dashboard  {scheme}://{}/", running.http_addr);
         println!(
-            "  REST API   http://{}/api/v1  (OpenAPI: /api/v1/openapi.json)",
+            "  REST API   {scheme}://{}/api/v1  (OpenAPI: /api/v1/openapi.json)",
             running.http_addr
         );
-        println!("  gRPC       http://{}", running.grpc_addr);
+        println!("  gRPC       {scheme}://{}", running.grpc_addr);
         println!("  data       {}", running.state.config.data_dir.display());
         println!("  workers    {workers} local");
         let stop = Arc::new(AtomicBool::new(false));
         let mut handles = Vec::new();
         for k in 0..workers {
             let options = WorkerOptions {
-                coordinator: format!("http://{}", running.grpc_addr),
+                coordinator: format!("{scheme}://{}", running.grpc_addr),
                 token: token.clone(),
                 name: format!("{}-local{}", options.name, k + 1),
                 ..options.clone()

@@ -60,6 +60,10 @@ pub struct ResultsArgs {
     /// The coordinator's bearer token.
     #[arg(long, env = "CRM_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
+    /// The CA certificate (PEM) of an `https://` coordinator with a private CA (`crm certs
+    /// dev` writes `ca.pem`); without it the system's roots are used.
+    #[arg(long, value_name = "FILE")]
+    pub ca: Option<PathBuf>,
     /// Local workers of the coordinator started here (without `--coordinator`).
     #[arg(long, default_value_t = 1)]
     pub workers: usize,
@@ -92,7 +96,7 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
     sac.validate()?;
     match &args.coordinator {
         Some(url) => {
-            let rest = Rest::new(url, args.token.clone())?;
+            let rest = Rest::new(url, args.token.clone(), args.ca.as_deref())?;
             study(&args, &rest, url, ppo, sac)
         }
         None => local(&args, ppo, sac),
@@ -115,6 +119,7 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
         let options = WorkerOptions {
             coordinator: format!("http://{}", running.grpc_addr),
             token: args.token.clone(),
+            ca: None,
             name: format!("results-local{}", k + 1),
             checkpoint_every_s: 120,
             poll_s: 0.5,
@@ -133,7 +138,7 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
         "coordinator at {url} (dashboard: {url}/), data in {}",
         args.data_dir.display()
     );
-    let rest = Rest::new(&url, args.token.clone())?;
+    let rest = Rest::new(&url, args.token.clone(), None)?;
     let result = study(args, &rest, &url, ppo, sac);
     stop.store(true, Ordering::Relaxed);
     runtime.block_on(running.stop())?;

@@ -1,0 +1,293 @@
+//! A hostile client against real binaries (docs/SECURITY.md): scoped tokens on every REST
+//! call and on the workers' gRPC service, per-client rate limits, leases a worker cannot
+//! forge, and both listeners over TLS with a certificate from `crm certs dev`.
+
+mod support;
+
+use crm_proto::pb;
+use crm_proto::pb::coordinator_client::CoordinatorClient;
+use support::*;
+
+const TRAIN: &str = r#"{"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 4096, "seed": 3, "envs": 2}"#;
+
+/// A gRPC client that sends `token` as its bearer token.
+async fn coordinator(
+    grpc: &str,
+    token: &'static str,
+) -> CoordinatorClient<
+    tonic::service::interceptor::InterceptedService<
+        tonic::transport::Channel,
+        impl tonic::service::Interceptor,
+    >,
+> {
+    let channel = tonic::transport::Channel::from_shared(format!("http://{grpc}"))
+        .expect("url")
+        .connect()
+        .await
+        .expect("connect");
+    CoordinatorClient::with_interceptor(channel, move |mut request: tonic::Request<()>| {
+        let value = format!("Bearer {token}").parse().expect("header");
+        request.metadata_mut().insert("authorization", value);
+        Ok(request)
+    })
+}
+
+#[test]
+fn every_scope_is_its_own_and_a_lease_cannot_be_forged() {
+    let data = TempDir::new("hostile-scopes");
+    let tokens = data.0.join("tokens.json");
+    std::fs::write(
+        &tokens,
+        r#"{"read": "read-secret", "submit": "submit-secret", "worker": "worker-secret"}"#,
+    )
+    .expect("tokens file");
+    let server = start_server(&data.0, &["--tokens-file", tokens.to_str().expect("utf-8")]);
+    let addr = server.http.clone();
+    let status = |method: &str, path: &str, token: Option<&str>| {
+        http(
+            &addr,
+            method,
+            path,
+            (method == "POST").then_some(TRAIN),
+            token,
+        )
+        .status
+    };
+    // Reads: the read or submit token; none, the worker's, or a prefix is refused.
+    assert_eq!(status("GET", "/api/v1/jobs", Some("read-secret")), 200);
+    assert_eq!(status("GET", "/api/v1/jobs", Some("submit-secret")), 200);
+    assert_eq!(status("GET", "/api/v1/jobs", None), 401);
+    assert_eq!(status("GET", "/api/v1/openapi.json", None), 401);
+    assert_eq!(status("GET", "/api/v1/jobs", Some("read-secre")), 401);
+    let reply = http(&addr, "GET", "/api/v1/workers", None, Some("worker-secret"));
+    assert_eq!(reply.status, 403);
+    assert_eq!(reply.json()["error"]["field"], "authorization");
+    // Writes: only the submit token.
+    assert_eq!(status("POST", "/api/v1/jobs", Some("read-secret")), 403);
+    assert_eq!(status("POST", "/api/v1/jobs", Some("worker-secret")), 403);
+    assert_eq!(status("POST", "/api/v1/jobs", Some("submit-secret")), 201);
+    // The dashboard's cookie reads, and never writes.
+    let cookie = |method: &str, token: &str| {
+        let header = format!("crm_token={token}");
+        try_http(
+            &addr,
+            method,
+            "/api/v1/jobs",
+            (method == "POST").then_some(TRAIN),
+            &[("Cookie", &header)],
+        )
+        .expect("request")
+        .status
+    };
+    assert_eq!(cookie("GET", "read-secret"), 200);
+    assert_eq!(cookie("GET", "wrong"), 401);
+    assert_eq!(cookie("POST", "submit-secret"), 401);
+    assert_eq!(status("GET", "/healthz", None), 200);
+
+    let runtime = tokio::runtime::Runtime::new().expect("runtime");
+    let job = runtime.block_on(async {
+        // The gRPC service is the worker scope's.
+        let mut reader = coordinator(&server.grpc, "read-secret").await;
+        let register = pb::RegisterRequest {
+            name: "a".into(),
+            cores: 1,
+            version: "test".into(),
+        };
+        let refused = reader
+            .register(register.clone())
+            .await
+            .expect_err("refused");
+        assert_eq!(refused.code(), tonic::Code::PermissionDenied);
+        let mut client = coordinator(&server.grpc, "worker-secret").await;
+        let a = client
+            .register(register.clone())
+            .await
+            .expect("a")
+            .into_inner();
+        let b = client
+            .register(pb::RegisterRequest {
+                name: "b".into(),
+                ..register
+            })
+            .await
+            .expect("b")
+            .into_inner();
+        assert_ne!(a.worker_secret, b.worker_secret);
+        // B cannot lease as A: the id is bound to A's secret.
+        let forged = client
+            .lease(pb::LeaseRequest {
+                worker_id: a.worker_id.clone(),
+                worker_secret: b.worker_secret.clone(),
+            })
+            .await
+            .expect_err("refused");
+        assert_eq!(forged.code(), tonic::Code::PermissionDenied);
+        let job = client
+            .lease(pb::LeaseRequest {
+                worker_id: a.worker_id.clone(),
+                worker_secret: a.worker_secret.clone(),
+            })
+            .await
+            .expect("lease")
+            .into_inner()
+            .job
+            .expect("the queued job");
+        assert_eq!(job.lease_token.len(), 32);
+        // Without A's lease token, nobody completes A's job: not B, not A's id without it.
+        for (worker, token) in [
+            (&b.worker_id, job.lease_token.as_str()),
+            (&a.worker_id, ""),
+            (&a.worker_id, "0123456789abcdef0123456789abcdef"),
+        ] {
+            let forged = client
+                .complete(pb::CompleteRequest {
+                    worker_id: worker.clone(),
+                    job_id: job.job_id,
+                    result_json: "{\"forged\": true}".into(),
+                    lease_token: token.into(),
+                })
+                .await
+                .expect_err("refused");
+            assert_eq!(forged.code(), tonic::Code::FailedPrecondition, "{forged}");
+        }
+        let stale = client
+            .heartbeat(pb::HeartbeatRequest {
+                worker_id: a.worker_id.clone(),
+                job_id: job.job_id,
+                worker_secret: a.worker_secret.clone(),
+                lease_token: "not-the-lease".into(),
+            })
+            .await
+            .expect("heartbeat")
+            .into_inner();
+        assert!(stale.stop, "a heartbeat under another lease stops");
+        client
+            .complete(pb::CompleteRequest {
+                worker_id: a.worker_id.clone(),
+                job_id: job.job_id,
+                result_json: "{}".into(),
+                lease_token: job.lease_token.clone(),
+            })
+            .await
+            .expect("the lease holder completes");
+        job.job_id
+    });
+    let reply = http(
+        &addr,
+        "GET",
+        &format!("/api/v1/jobs/{job}"),
+        None,
+        Some("read-secret"),
+    );
+    let stored = reply.json();
+    assert_eq!(stored["state"], "succeeded");
+    assert!(stored["result"].get("forged").is_none(), "{stored}");
+}
+
+#[test]
+fn a_client_over_its_rate_gets_429_with_retry_after_and_others_do_not() {
+    let data = TempDir::new("hostile-rate");
+    let server = start_server(
+        &data.0,
+        &[
+            "--token",
+            TOKEN,
+            "--rate-limit-per-s",
+            "1",
+            "--rate-limit-burst",
+            "5",
+        ],
+    );
+    let addr = server.http.clone();
+    for _ in 0..5 {
+        assert_eq!(
+            http(&addr, "GET", "/api/v1/jobs", None, Some(TOKEN)).status,
+            200
+        );
+    }
+    // Limited before the token is looked at: a flood without one is cut the same way.
+    let limited = http(&addr, "GET", "/api/v1/jobs", None, None);
+    assert_eq!(limited.status, 429);
+    assert!(
+        limited
+            .header("retry-after")
+            .and_then(|s| s.parse::<u64>().ok())
+            .is_some_and(|s| s >= 1),
+        "{}",
+        limited.head
+    );
+    assert_eq!(limited.json()["error"]["code"], "rate_limited");
+    assert_eq!(http(&addr, "GET", "/healthz", None, None).status, 200);
+}
+
+#[test]
+fn both_listeners_speak_tls_with_dev_certificates() {
+    let data = TempDir::new("hostile-tls");
+    let certs = data.0.join("certs");
+    let made = std::process::Command::new(crm())
+        .args(["certs", "dev"])
+        .arg(&certs)
+        .output()
+        .expect("crm certs dev");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let again = std::process::Command::new(crm())
+        .args(["certs", "dev"])
+        .arg(&certs)
+        .output()
+        .expect("crm certs dev");
+    assert!(
+        !again.status.success(),
+        "existing files are not overwritten"
+    );
+    let path = |name: &str| certs.join(name).to_str().expect("utf-8").to_string();
+    let server = start_server(
+        &data.0.join("data"),
+        &[
+            "--token",
+            TOKEN,
+            "--tls-cert",
+            &path("server.pem"),
+            "--tls-key",
+            &path("server.key"),
+        ],
+    );
+    // Plain HTTP to the TLS port gets no HTTP answer.
+    let plain = try_http(&server.http, "GET", "/healthz", None, &[]);
+    assert!(
+        plain.map_or(true, |r| r.status != 200),
+        "plain HTTP answered"
+    );
+    let _worker = start_worker(
+        &format!("https://{}", server.grpc),
+        &["--token", TOKEN, "--ca", &path("ca.pem")],
+    );
+    let model =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/crm-ppo.safetensors");
+    let eval = |ca: Option<&str>| {
+        let mut command = std::process::Command::new(crm());
+        command
+            .args(["eval", "--episodes", "2", "--json", "--coordinator"])
+            .arg(format!("https://{}", server.http))
+            .args(["--token", TOKEN, "--checkpoint"])
+            .arg(&model);
+        if let Some(ca) = ca {
+            command.args(["--ca", ca]);
+        }
+        command.output().expect("crm eval")
+    };
+    // Without the CA the coordinator's certificate is not trusted.
+    let untrusted = eval(None);
+    assert!(!untrusted.status.success());
+    let remote = eval(Some(&path("ca.pem")));
+    assert!(
+        remote.status.success(),
+        "{}",
+        String::from_utf8_lossy(&remote.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&remote.stdout).expect("json");
+    assert_eq!(report["episodes"], 2, "{report}");
+}
