@@ -148,3 +148,52 @@ fn the_dashboard_works_in_chromium() {
     );
     println!("{stdout}");
 }
+
+/// With tokens, the dashboard asks for a read token once (its login page) and keeps working:
+/// jobs, live updates, a checkpoint download, a reload (`web/tests/login.mjs`).
+#[test]
+fn the_dashboard_signs_in_with_a_read_token_in_chromium() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let web = root.join("web");
+    if std::env::var("CRM_SKIP_BROWSER").is_ok_and(|v| v == "1") {
+        eprintln!("CRM_SKIP_BROWSER=1: the browser test is skipped");
+        return;
+    }
+    let data = TempDir::new("web-login");
+    let models = root.join("models");
+    let (read, submit) = ("read-7f3a9c", "submit-2b81de");
+    let server = start_server(
+        &data.0,
+        &[
+            "--models",
+            models.to_str().expect("utf-8 path"),
+            "--read-token",
+            read,
+            "--submit-token",
+            submit,
+            "--worker-token",
+            "worker-c04e51",
+        ],
+    );
+    let addr = server.http.clone();
+    let listed = support::http(&addr, "GET", "/api/v1/checkpoints", None, Some(read)).json();
+    let checkpoint = listed["checkpoints"][0]["id"]
+        .as_i64()
+        .expect("a shipped model");
+    let out = Command::new("node")
+        .arg(web.join("tests/login.mjs"))
+        .current_dir(&web)
+        .env("CRM_BASE", format!("http://{addr}"))
+        .env("CRM_READ_TOKEN", read)
+        .env("CRM_SUBMIT_TOKEN", submit)
+        .env("CRM_CHECKPOINT", checkpoint.to_string())
+        .output()
+        .expect("run node (is Node.js installed?)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "login checks failed:\n{stdout}\n{stderr}"
+    );
+    assert!(stdout.contains("login: ok"), "{stdout}");
+}

@@ -151,7 +151,12 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
     });
     let stop = shutdown.clone();
     let service = grpc::service(state.clone());
-    let mut builder = tonic::transport::Server::builder();
+    // HTTP/2 pings find a worker whose connection died without a close (a cable pulled):
+    // every 20 s, 10 s to answer (gRPC's keepalive guide suggests minutes for clients; a
+    // server may ping more often, and a worker's heartbeat is 5 s anyway).
+    let mut builder = tonic::transport::Server::builder()
+        .http2_keepalive_interval(Some(std::time::Duration::from_secs(20)))
+        .http2_keepalive_timeout(Some(std::time::Duration::from_secs(10)));
     if let Some(identity) = &identity {
         builder = builder
             .tls_config(identity.grpc())

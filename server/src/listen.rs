@@ -6,7 +6,9 @@
 //! `Retry-After` and closed; an accept error (out of descriptors) is logged and retried, never
 //! fatal. Shutdown lets open connections finish their requests. The gRPC listener's
 //! connections ([`grpc_incoming`]) are capped and closed when idle the same way (a worker
-//! heartbeats every few seconds).
+//! heartbeats every few seconds). With `--tls-cert`, each REST connection is a TLS stream
+//! (rustls; the handshake gets the header timeout), and each request carries its client's
+//! address for the rate limit (`api/rate.rs`).
 
 use std::future::Future;
 use std::io;
@@ -16,8 +18,6 @@ use std::task::{Context, Poll};
 use std::time::Duration;
 
 use axum::Router;
-
-use crate::api::rate::ClientAddr;
 use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
 use hyper_util::server::conn::auto::Builder;
 use hyper_util::service::TowerToHyperService;
@@ -25,6 +25,8 @@ use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{OwnedSemaphorePermit, Semaphore, mpsc, watch};
 use tokio::time::{Instant, Sleep};
+
+use crate::api::rate::ClientAddr;
 
 /// How long and how many connections the listener keeps.
 #[derive(Clone, Copy, Debug)]

@@ -41,6 +41,8 @@ let loginShown = false;
 export function showLogin(message) {
   if (loginShown) return;
   loginShown = true;
+  // The login replaces the page's <main>, so the page's own code, still loading, draws into
+  // the detached one and never over the form.
   const main = document.getElementById('main');
   const input = el('input', {
     id: 'login-token', type: 'password', autocomplete: 'current-password', required: true,
@@ -58,7 +60,7 @@ export function showLogin(message) {
   el('p', {}, message),
   el('label', {}, 'Token ', input),
   el('button', { type: 'submit' }, 'Sign in'));
-  main.replaceChildren(form);
+  main.replaceWith(el('main', { id: 'main' }, form));
   document.title = 'Sign in · crm-grasp';
   input.focus();
 }

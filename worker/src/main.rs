@@ -7,6 +7,26 @@ mod service;
 
 use clap::{Parser, Subcommand};
 
+/// Sets `RAYON_NUM_THREADS` to the threads rayon would use anyway (the available
+/// parallelism), unless it is set. candle asks for its thread count before every matrix
+/// product and, without the variable, counts the physical cores by reading `/proc/cpuinfo`:
+/// three reads per policy step of every environment, about 8% of a training iteration's time
+/// (docs/BENCHMARKS.md, "Learning speed end to end"). With it, the count is one variable
+/// lookup; rayon's pool is the same size, and every product still runs on one thread
+/// (`crm_learn::kernels`), so results are bit for bit the same.
+fn name_thread_count() {
+    if std::env::var_os("RAYON_NUM_THREADS").is_some() {
+        return;
+    }
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // SAFETY: called first thing in `main`, before any other thread exists, so nothing reads
+    // the environment while it changes.
+    #[allow(unsafe_code)]
+    unsafe {
+        std::env::set_var("RAYON_NUM_THREADS", threads.to_string());
+    }
+}
+
 #[derive(Parser)]
 #[command(
     name = "crm",
@@ -60,6 +80,7 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    name_thread_count();
     let cli = Cli::parse();
     // Parallel environments, one thread per matrix product (see `crm_learn::kernels`).
     crm_learn::kernels::one_thread_per_product();
