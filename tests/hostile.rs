@@ -1,6 +1,7 @@
 //! A hostile client against real binaries (docs/SECURITY.md): scoped tokens on every REST
 //! call and on the workers' gRPC service, per-client rate limits, leases a worker cannot
-//! forge, and both listeners over TLS with a certificate from `crm certs dev`.
+//! forge, a flood of idle, slow, streaming and stalled clients, and TLS with a certificate
+//! from `crm certs dev` for REST, gRPC workers and `crm serve-policy`.
 
 mod support;
 
@@ -290,4 +291,189 @@ fn both_listeners_speak_tls_with_dev_certificates() {
     );
     let report: serde_json::Value = serde_json::from_slice(&remote.stdout).expect("json");
     assert_eq!(report["episodes"], 2, "{report}");
+
+    // `crm serve-policy` over TLS, behind a token.
+    let port = free_port();
+    let mut child = std::process::Command::new(crm())
+        .args(["serve-policy", "--listen", &format!("127.0.0.1:{port}")])
+        .args(["--token", TOKEN, "--tls-cert", &path("server.pem")])
+        .args(["--tls-key", &path("server.key"), "--checkpoint"])
+        .arg(&model)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("serve-policy");
+    let mut banner = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stdout.take().expect("stdout")),
+        &mut banner,
+    )
+    .expect("banner");
+    let _policy = Proc(child);
+    assert!(banner.contains("https://"), "{banner}");
+    let ca = std::fs::read(path("ca.pem")).expect("ca");
+    let runtime = tokio::runtime::Runtime::new().expect("runtime");
+    let info = runtime.block_on(async {
+        let tls = tonic::transport::ClientTlsConfig::new()
+            .ca_certificate(tonic::transport::Certificate::from_pem(ca));
+        let channel = tonic::transport::Channel::from_shared(format!("https://127.0.0.1:{port}"))
+            .expect("url")
+            .tls_config(tls)
+            .expect("tls")
+            .connect()
+            .await
+            .expect("connect over TLS");
+        let mut client = crm_proto::pb::policy_client::PolicyClient::with_interceptor(
+            channel,
+            |mut r: tonic::Request<()>| {
+                let bearer = format!("Bearer {TOKEN}").parse().expect("header");
+                r.metadata_mut().insert("authorization", bearer);
+                Ok(r)
+            },
+        );
+        client
+            .describe(pb::DescribeRequest {})
+            .await
+            .expect("describe")
+            .into_inner()
+    });
+    assert_eq!(info.algorithm, "crm-ppo");
+}
+
+/// The coordinator's resident memory (kB), from `/proc`.
+fn rss_kb(pid: u32) -> u64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmRSS:"))
+                .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        })
+        .unwrap_or(0)
+}
+
+/// A flood, all at once: 5,000 connections that send nothing or half a header, 1,000 event
+/// streams and 20 checkpoint downloads that are never read. Through it `/healthz` answers in
+/// under a second, a worker registers and leases, every GET without a token is refused, and
+/// the coordinator's memory stays under 300 MB. Stops by itself: the sockets close at the end.
+#[test]
+fn a_flood_of_hostile_clients_leaves_the_coordinator_answering() {
+    use std::io::Write;
+    use std::net::TcpStream;
+    use std::time::{Duration, Instant};
+    let data = TempDir::new("hostile-flood");
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    // Room for the whole flood under the connection cap, so that what is measured is the
+    // coordinator holding it (the cap itself: `tests/service.rs`).
+    let server = start_server(
+        &data.0,
+        &[
+            "--token",
+            TOKEN,
+            "--models",
+            models.to_str().expect("utf-8"),
+            "--max-connections",
+            "8000",
+            // Nothing is cut while the flood is being opened (it takes seconds).
+            "--header-timeout-s",
+            "60",
+            // The whole flood comes from one address: a budget it cannot spend, so that the
+            // event streams meet their own cap (the rate limit has its test above).
+            "--rate-limit-burst",
+            "100000",
+        ],
+    );
+    let addr = server.http.clone();
+    let pid = server.proc.0.id();
+    let job = submit_as(&addr, TRAIN, Some(TOKEN))["id"]
+        .as_i64()
+        .expect("job");
+    let checkpoints = get(&addr, "/api/v1/checkpoints");
+    let checkpoint = checkpoints["checkpoints"][0]["id"]
+        .as_i64()
+        .expect("a shipped model");
+    let baseline = rss_kb(pid);
+    let started = Instant::now();
+    let mut flood = Vec::new();
+    for k in 0..5000 {
+        let mut stream = TcpStream::connect(&addr).expect("connect");
+        if k % 2 == 1 {
+            let _ = stream.write_all(b"GET /api/v1/jobs HTTP/1.1\r\nHost: x\r\nX-Slow: ");
+        }
+        flood.push(stream);
+    }
+    let ask = |path: String| {
+        format!("GET {path} HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n\r\n")
+    };
+    for k in 0..1020 {
+        let mut stream = TcpStream::connect(&addr).expect("connect");
+        let path = if k < 20 {
+            format!("/api/v1/checkpoints/{checkpoint}/download")
+        } else {
+            "/api/v1/events".to_string()
+        };
+        let _ = stream.write_all(ask(path).as_bytes());
+        flood.push(stream);
+    }
+    let opened = started.elapsed();
+    std::thread::sleep(Duration::from_millis(500));
+    // Health, within a second, several times through the flood.
+    let mut slowest = Duration::ZERO;
+    for _ in 0..5 {
+        let asked = Instant::now();
+        let reply = http(&addr, "GET", "/healthz", None, None);
+        assert_eq!(reply.status, 200);
+        slowest = slowest.max(asked.elapsed());
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert!(
+        slowest < Duration::from_secs(1),
+        "/healthz took {slowest:?}"
+    );
+    // A worker registers and leases the queued job.
+    let runtime = tokio::runtime::Runtime::new().expect("runtime");
+    let leased = runtime.block_on(async {
+        let mut client = coordinator(&server.grpc, TOKEN).await;
+        let me = client
+            .register(pb::RegisterRequest {
+                name: "through-the-flood".into(),
+                cores: 1,
+                version: "test".into(),
+            })
+            .await
+            .expect("register")
+            .into_inner();
+        client
+            .lease(pb::LeaseRequest {
+                worker_id: me.worker_id,
+                worker_secret: me.worker_secret,
+            })
+            .await
+            .expect("lease")
+            .into_inner()
+            .job
+            .map(|j| j.job_id)
+    });
+    assert_eq!(leased, Some(job));
+    // Every GET route of the API refuses a client without the token (the document's paths,
+    // `{id}` as 1).
+    let doc = http(&addr, "GET", "/api/v1/openapi.json", None, Some(TOKEN)).json();
+    let mut routes = 0;
+    for (path, operations) in doc["paths"].as_object().expect("paths") {
+        if path == "/healthz" || operations.get("get").is_none() {
+            continue;
+        }
+        let status = http(&addr, "GET", &path.replace("{id}", "1"), None, None).status;
+        assert_eq!(status, 401, "GET {path} without a token");
+        routes += 1;
+    }
+    assert!(routes >= 20, "{routes} GET routes");
+    let peak = rss_kb(pid);
+    eprintln!(
+        "flood: {} connections opened in {opened:?}; /healthz at most {slowest:?}; RSS {} MB before, {} MB during; {routes} GET routes refused without a token",
+        flood.len(),
+        baseline / 1024,
+        peak / 1024
+    );
+    assert!(peak < 300 * 1024, "RSS {} MB", peak / 1024);
+    drop(flood);
 }
