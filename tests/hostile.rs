@@ -85,6 +85,20 @@ fn every_scope_is_its_own_and_a_lease_cannot_be_forged() {
     assert_eq!(cookie("POST", "submit-secret"), 401);
     assert_eq!(status("GET", "/healthz", None), 200);
 
+    // A worker given the read token exits at once, saying why.
+    let out = std::process::Command::new(crm())
+        .args([
+            "worker",
+            "--coordinator",
+            &format!("http://{}", server.grpc),
+        ])
+        .args(["--token", "read-secret"])
+        .output()
+        .expect("run worker");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("worker scope"), "{stderr}");
+
     let runtime = tokio::runtime::Runtime::new().expect("runtime");
     let job = runtime.block_on(async {
         // The gRPC service is the worker scope's.

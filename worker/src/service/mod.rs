@@ -64,11 +64,14 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
             .await
         {
             Ok(reply) => reply.into_inner(),
-            // A wrong token or a name the coordinator refuses will not change on a retry.
+            // A wrong token, a token without the worker scope or a name the coordinator
+            // refuses will not change on a retry.
             Err(status)
                 if matches!(
                     status.code(),
-                    tonic::Code::Unauthenticated | tonic::Code::InvalidArgument
+                    tonic::Code::Unauthenticated
+                        | tonic::Code::PermissionDenied
+                        | tonic::Code::InvalidArgument
                 ) =>
             {
                 anyhow::bail!("the coordinator refused this worker: {}", status.message());
