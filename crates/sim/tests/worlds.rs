@@ -555,3 +555,33 @@ fn the_hash_follows_the_hands_files_by_content_not_by_place() {
     std::fs::remove_dir_all(root).ok();
     std::fs::remove_dir_all(elsewhere).ok();
 }
+
+/// A joint no finger commands and the profile does not hold is held at 0, and 0 must lie in
+/// its limits as an explicit `held` angle must.
+#[test]
+fn an_implicit_hold_at_0_beyond_a_joints_limits_is_refused() {
+    let root = test_world("implicit-hold");
+    let urdf = root.join("assets/my_hand/urdf/hand.urdf");
+    let text = std::fs::read_to_string(&urdf).expect("read");
+    let from = "<limit lower=\"-0.2\" upper=\"2.0\" effort=\"1\" velocity=\"5\"/>\n    <mimic joint=\"little_pip\" multiplier=\"0.57\"";
+    assert!(text.contains(from), "the test hand's little_dip");
+    std::fs::write(&urdf, text.replacen(from, &from.replace("-0.2", "0.1"), 1)).expect("write");
+    let profile = root.join("world/hand.json");
+    let mut hand: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&profile).expect("read")).expect("JSON");
+    hand["fingers"]["little"]["joints"]
+        .as_array_mut()
+        .expect("joints")
+        .retain(|j| j["joint"] != "little_dip");
+    std::fs::write(&profile, hand.to_string()).expect("write");
+    let err = World::load_with(&root.join("world"), &assets(&root))
+        .expect_err("refused")
+        .to_string();
+    for part in ["held.little_dip", "held at 0", "limits [0.1, 2]"] {
+        assert!(err.contains(part), "{part:?} not in {err}");
+    }
+    hand["held"] = serde_json::json!({ "little_dip": 0.1 });
+    std::fs::write(&profile, hand.to_string()).expect("write");
+    World::load_with(&root.join("world"), &assets(&root)).expect("held within its limits");
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -296,10 +296,34 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
             names[others.len()..].join(" and ")
         ));
     }
+    // Held joints rest at 0, or at the limit nearest 0 where 0 is beyond their limits.
+    let mut held = BTreeMap::new();
+    for name in &held_spreads {
+        let limits = description
+            .joints
+            .iter()
+            .find(|j| &j.name == name)
+            .and_then(|j| j.limits);
+        if let Some([lo, hi]) = limits
+            && !(lo..=hi).contains(&0.0)
+        {
+            let nearest = if lo > 0.0 { lo } else { hi };
+            held.insert(name.clone(), (nearest * 1e3).round() / 1e3);
+        }
+    }
     if !held_spreads.is_empty() {
+        let at_limits: Vec<String> = held.iter().map(|(n, v)| format!("{n} at {v}")).collect();
         notes.push(format!(
-            "held at 0 (spread, opposition or extra joints; set `held` to another angle): {}",
-            held_spreads.join(", ")
+            "held at 0 (spread, opposition or extra joints; set `held` to another angle): {}{}",
+            held_spreads.join(", "),
+            if at_limits.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; where 0 is beyond a joint's limits, at the nearest: {}",
+                    at_limits.join(", ")
+                )
+            }
         ));
     }
 
@@ -405,7 +429,7 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
         },
         topologies,
         relaxed: BTreeMap::new(),
-        held: BTreeMap::new(),
+        held,
     };
     Ok(Draft { profile, notes })
 }

@@ -360,6 +360,19 @@ impl HandModel {
                     entry.1 = value;
                 }
             }
+            // A joint nobody holds explicitly is held at 0, which must lie in its limits too.
+            if let Some((j, message)) = angles
+                .iter()
+                .find_map(|&(j, value)| Some((j, beyond_limits(&model_joints[j], value)?)))
+            {
+                let name = &model_joints[j].name;
+                return Err(invalid(
+                    format!("held.{name}"),
+                    format!(
+                        "no finger commands this joint, so it is held at 0, which is {message}; hold it within them in `held`"
+                    ),
+                ));
+            }
             shapes.insert(topology, fingers_shape);
             held.insert(topology, angles);
         }
