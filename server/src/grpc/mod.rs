@@ -97,16 +97,18 @@ impl CoordinatorService {
     }
 
     /// Refuses a call about `job` unless `token` is its current lease's secret and
-    /// `worker` holds that lease (a stale lease's token, or another worker's, is refused).
-    async fn require_lease(&self, worker: &str, job: i64, token: &str) -> Result<(), Status> {
+    /// `worker` holds that lease (a stale lease's token, or another worker's, is refused);
+    /// returns the token's hash, which names the lease in the store.
+    async fn require_lease(&self, worker: &str, job: i64, token: &str) -> Result<String, Status> {
         let hash = secrets::hash(token);
-        let lease = Lease {
-            worker,
-            job,
-            hash: &hash,
-        };
-        if self.state.store.holds(lease).await.map_err(status)? {
-            Ok(())
+        if self
+            .state
+            .store
+            .holds(Lease::new(worker, job, &hash))
+            .await
+            .map_err(status)?
+        {
+            Ok(hash)
         } else {
             Err(Status::failed_precondition(format!(
                 "worker {worker} does not hold job {job} under this lease token"
@@ -212,11 +214,7 @@ impl Coordinator for CoordinatorService {
         let r = request.into_inner();
         self.require_worker(&r.worker_id, &r.worker_secret).await?;
         let hash = secrets::hash(&r.lease_token);
-        let lease = Lease {
-            worker: &r.worker_id,
-            job: r.job_id,
-            hash: &hash,
-        };
+        let lease = Lease::new(&r.worker_id, r.job_id, &hash);
         let held = self
             .state
             .store
@@ -494,18 +492,13 @@ impl Coordinator for CoordinatorService {
         if serde_json::from_str::<serde_json::Value>(&r.result_json).is_err() {
             return Err(Status::invalid_argument("result_json: not JSON"));
         }
-        self.require_lease(&r.worker_id, r.job_id, &r.lease_token)
+        let hash = self
+            .require_lease(&r.worker_id, r.job_id, &r.lease_token)
             .await?;
-        let hash = secrets::hash(&r.lease_token);
-        let lease = Lease {
-            worker: &r.worker_id,
-            job: r.job_id,
-            hash: &hash,
-        };
         let evaluation = self
             .state
             .store
-            .succeed(lease, &r.result_json)
+            .succeed(Lease::new(&r.worker_id, r.job_id, &hash), &r.result_json)
             .await
             .map_err(status)?;
         tracing::info!(job = r.job_id, worker = r.worker_id, "job succeeded");
@@ -521,14 +514,10 @@ impl Coordinator for CoordinatorService {
         request: Request<pb::FailRequest>,
     ) -> Result<Response<pb::CompleteReply>, Status> {
         let r = request.into_inner();
-        self.require_lease(&r.worker_id, r.job_id, &r.lease_token)
+        let hash = self
+            .require_lease(&r.worker_id, r.job_id, &r.lease_token)
             .await?;
-        let hash = secrets::hash(&r.lease_token);
-        let lease = Lease {
-            worker: &r.worker_id,
-            job: r.job_id,
-            hash: &hash,
-        };
+        let lease = Lease::new(&r.worker_id, r.job_id, &hash);
         self.state
             .store
             .finish(lease, "failed", None, Some(&r.message))

@@ -141,6 +141,12 @@ pub struct Lease<'a> {
     pub hash: &'a str,
 }
 
+impl<'a> Lease<'a> {
+    pub fn new(worker: &'a str, job: i64, hash: &'a str) -> Self {
+        Self { worker, job, hash }
+    }
+}
+
 /// The store: a connection pool and the checkpoint folder.
 #[derive(Clone)]
 pub struct Store {
