@@ -13,7 +13,7 @@
 
 mod support;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use serde_json::{Value, json};
@@ -36,18 +36,27 @@ fn train(algorithm: &str, seed: u64) -> Value {
     body
 }
 
-#[test]
-fn the_dashboard_works_in_chromium() {
+/// The repository's root and `web/` folder, once the browser's parts are there; `None` (the
+/// test skipped) with `CRM_SKIP_BROWSER=1`.
+fn browser() -> Option<(PathBuf, PathBuf)> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let web = root.join("web");
     if std::env::var("CRM_SKIP_BROWSER").is_ok_and(|v| v == "1") {
         eprintln!("CRM_SKIP_BROWSER=1: the browser test is skipped");
-        return;
+        return None;
     }
     assert!(
         web.join("node_modules/playwright-core").exists(),
         "run the tests with `scripts/test`, which installs Node.js, Chromium and playwright-core (or `npm ci --prefix web` and `apt-get install chromium`), or set CRM_SKIP_BROWSER=1"
     );
+    Some((root, web))
+}
+
+#[test]
+fn the_dashboard_works_in_chromium() {
+    let Some((root, web)) = browser() else {
+        return;
+    };
 
     let data = TempDir::new("web");
     // The shipped models are registered on this new data folder (the models page lists them).
@@ -153,12 +162,9 @@ fn the_dashboard_works_in_chromium() {
 /// jobs, live updates, a checkpoint download, a reload (`web/tests/login.mjs`).
 #[test]
 fn the_dashboard_signs_in_with_a_read_token_in_chromium() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let web = root.join("web");
-    if std::env::var("CRM_SKIP_BROWSER").is_ok_and(|v| v == "1") {
-        eprintln!("CRM_SKIP_BROWSER=1: the browser test is skipped");
+    let Some((root, web)) = browser() else {
         return;
-    }
+    };
     let data = TempDir::new("web-login");
     let models = root.join("models");
     let (read, submit) = ("read-7f3a9c", "submit-2b81de");

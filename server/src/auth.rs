@@ -80,12 +80,15 @@ pub enum Verdict {
 }
 
 impl Tokens {
-    /// One token with every scope (tests, and `crm up --token`).
-    pub fn all(token: Option<&str>) -> Self {
-        Self {
+    /// One token with every scope (tests, and `crm serve-policy --token`), checked as the
+    /// coordinator's are.
+    pub fn all(token: Option<&str>) -> anyhow::Result<Self> {
+        let tokens = Self {
             all: token.map(str::to_string),
             ..Self::default()
-        }
+        };
+        tokens.validate()?;
+        Ok(tokens)
     }
 
     /// The coordinator's tokens: the configuration's, then `--tokens-file`'s for those it
@@ -274,7 +277,7 @@ mod tests {
             "a prefix"
         );
         assert_eq!(t.check(Some("wrong"), Read), Unauthenticated);
-        let all = Tokens::all(Some("every-scope"));
+        let all = Tokens::all(Some("every-scope")).expect("a valid token");
         for scope in [Read, Submit, Worker] {
             assert_eq!(all.check(Some("every-scope"), scope), Allowed);
             assert_eq!(all.check(None, scope), Unauthenticated);

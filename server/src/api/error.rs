@@ -62,6 +62,17 @@ impl ApiError {
         }
     }
 
+    /// 429: a client over its request budget (`api/rate.rs`).
+    pub fn rate_limited() -> Self {
+        Self {
+            status: StatusCode::TOO_MANY_REQUESTS,
+            code: "rate_limited",
+            message: "too many requests from this address; retry after the seconds in Retry-After"
+                .into(),
+            field: None,
+        }
+    }
+
     pub fn unauthorized() -> Self {
         Self {
             status: StatusCode::UNAUTHORIZED,

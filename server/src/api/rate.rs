@@ -11,10 +11,11 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use axum::extract::{Request, State};
-use axum::http::StatusCode;
+use axum::http::header;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
+use super::error::ApiError;
 use crate::AppState;
 
 /// Most client addresses tracked one by one.
@@ -97,8 +98,6 @@ impl Limiter {
     }
 }
 
-const LIMITED: &str = "{\"error\":{\"code\":\"rate_limited\",\"field\":null,\"message\":\"too many requests from this address; retry after the seconds in Retry-After\"}}";
-
 /// The middleware: 429 with `Retry-After` once a client's bucket is empty. Requests without
 /// a client address (handed to the router in-process) are not limited.
 pub async fn limit(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
@@ -106,12 +105,8 @@ pub async fn limit(State(state): State<Arc<AppState>>, request: Request, next: N
         && let Err(wait) = state.rate.take(addr.ip(), Instant::now())
     {
         return (
-            StatusCode::TOO_MANY_REQUESTS,
-            [
-                ("retry-after", wait.to_string()),
-                ("content-type", "application/json".to_string()),
-            ],
-            LIMITED,
+            [(header::RETRY_AFTER, wait.to_string())],
+            ApiError::rate_limited(),
         )
             .into_response();
     }

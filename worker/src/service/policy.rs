@@ -127,7 +127,7 @@ impl Policy for PolicyService {
 /// Who may call a policy server, and over what: a bearer token (none: anyone who reaches the
 /// address) and TLS (`--tls-cert`, `--tls-key`).
 pub struct Access {
-    token: Option<String>,
+    tokens: crm_server::auth::Tokens,
     identity: Option<crm_server::tls::Identity>,
 }
 
@@ -136,16 +136,13 @@ impl Access {
         token: Option<String>,
         tls: Option<(std::path::PathBuf, std::path::PathBuf)>,
     ) -> anyhow::Result<Self> {
-        if let Some(token) = &token
-            && (token.is_empty() || !token.bytes().all(|b| b.is_ascii_graphic()))
-        {
-            anyhow::bail!("--token: printable ASCII without spaces, not empty");
-        }
+        let tokens = crm_server::auth::Tokens::all(token.as_deref())
+            .map_err(|e| anyhow::anyhow!("--{e:#}"))?;
         let identity = match tls {
             Some((cert, key)) => Some(crm_server::tls::Identity::load(&cert, &key)?),
             None => None,
         };
-        Ok(Self { token, identity })
+        Ok(Self { tokens, identity })
     }
 }
 
@@ -172,16 +169,13 @@ pub fn serve_main(
         println!(
             "crm serve-policy: gRPC Policy on {scheme}://{bound} ({}){}",
             service.info.algorithm,
-            if access.token.is_some() {
+            if access.tokens.enabled() {
                 ", token required"
             } else {
                 ""
             }
         );
-        let check = crm_server::grpc::TokenCheck::new(
-            crm_server::auth::Tokens::all(access.token.as_deref()),
-            crm_server::auth::Scope::Read,
-        );
+        let check = crm_server::grpc::TokenCheck::new(access.tokens, crm_server::auth::Scope::Read);
         let mut builder = tonic::transport::Server::builder();
         if let Some(identity) = &access.identity {
             builder = builder.tls_config(identity.grpc())?;
