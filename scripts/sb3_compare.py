@@ -10,7 +10,7 @@ protocol), as `crm train` without `--task`. The policy sees the global observati
 CRM stage one-hot (CRM-PPO's input); the reward is the CRM's, intra-stage plus transition.
 `paper`: the paper's PPO settings (`PpoConfig`'s defaults: learning rate 3e-5 with the
 paper's steps, 2,048 samples per rollout, minibatch 64, 10 epochs); `shipped`: the shipped
-model's recipe (docs/learning/h-window1000.json: 3e-4, 8,192 per rollout, minibatch 512,
+model's recipe (models/crm-ppo.config.json: 3e-4, 8,192 per rollout, minibatch 512,
 log-std -0.5). Both: gamma 0.99, lambda 0.95, clip 0.2, value coef 0.5, grad norm 0.5,
 256x256 tanh networks, VecNormalize on observations and rewards, 16 environments. Training
 stops when 99% of the last `--window` episodes succeeded or after `--minutes`.
@@ -37,7 +37,7 @@ import crm_grasp
 CONFIGS = {
     # crates/api/src/config.rs, PpoConfig::default() (the paper's section V-B).
     "paper": dict(learning_rate=3e-5, rollout=2048, batch_size=64, log_std_init=0.0),
-    # docs/learning/h-window1000.json (models/README.md).
+    # models/crm-ppo.config.json (models/README.md), at a constant learning rate.
     "shipped": dict(learning_rate=3e-4, rollout=8192, batch_size=512, log_std_init=-0.5),
 }
 

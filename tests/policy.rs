@@ -113,6 +113,13 @@ fn the_policy_service_acts_and_refuses_bad_observations() {
             .expect("act")
             .into_inner();
         assert_eq!(grasp.stage, "grasp");
+        // The fingers only close, by |a|: the deterministic action gives each the sampled
+        // action's mean magnitude, which the noise makes positive.
+        assert!(
+            grasp.action[3..].iter().all(|&a| a > 0.0),
+            "{:?}",
+            grasp.action
+        );
         for (observation, stage, what) in [
             (vec![0.0f32; 37], "", "observation"),
             (vec![f32::NAN; 38], "", "not finite"),

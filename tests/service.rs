@@ -128,8 +128,8 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
         ),
     );
     let evaluated = wait_state(&addr, eval["id"].as_i64().expect("id"), "succeeded", 240);
-    // Its mean action is what cloning fit (sampled at the start's noise, std 1, a 64-step
-    // clone presses in about a third of its episodes).
+    // Its deterministic palm action is the mean cloning fit, all a press needs (sampled at
+    // the start's noise, std 1, a 64-step clone presses in about a third of its episodes).
     assert!(
         evaluated["result"]["success_rate"].as_f64().expect("rate") > 0.0,
         "the clone presses: {}",

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 /// Coordinator settings. Defaults: REST on 127.0.0.1:8080, gRPC on 127.0.0.1:50051, data in
 /// `./data`, no token, the shipped models from `./models`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::Args)]
+#[derive(Clone, PartialEq, Serialize, Deserialize, clap::Args)]
 #[serde(default, deny_unknown_fields)]
 pub struct ServerConfig {
     /// Address of the REST API and dashboard.
@@ -107,6 +107,42 @@ pub struct ServerConfig {
     pub worlds: Option<PathBuf>,
 }
 
+/// Debug without the tokens' values: a token shows as `<set>`, so a logged configuration
+/// never carries a secret.
+impl std::fmt::Debug for ServerConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ServerConfig")
+            .field("http", &self.http)
+            .field("grpc", &self.grpc)
+            .field("data_dir", &self.data_dir)
+            .field("token", &self.token.as_ref().map(|_| "<set>"))
+            .field("read_token", &self.read_token.as_ref().map(|_| "<set>"))
+            .field("submit_token", &self.submit_token.as_ref().map(|_| "<set>"))
+            .field("worker_token", &self.worker_token.as_ref().map(|_| "<set>"))
+            .field("tokens_file", &self.tokens_file)
+            .field("rate_limit_per_s", &self.rate_limit_per_s)
+            .field("rate_limit_burst", &self.rate_limit_burst)
+            .field("tls_cert", &self.tls_cert)
+            .field("tls_key", &self.tls_key)
+            .field("lease_ttl_s", &self.lease_ttl_s)
+            .field("heartbeat_interval_s", &self.heartbeat_interval_s)
+            .field("max_body_bytes", &self.max_body_bytes)
+            .field("max_concurrent_requests", &self.max_concurrent_requests)
+            .field("max_connections", &self.max_connections)
+            .field("max_event_streams", &self.max_event_streams)
+            .field("header_timeout_s", &self.header_timeout_s)
+            .field("idle_timeout_s", &self.idle_timeout_s)
+            .field("max_checkpoint_bytes", &self.max_checkpoint_bytes)
+            .field("max_recording_bytes", &self.max_recording_bytes)
+            .field("episodes_kept", &self.episodes_kept)
+            .field("keep_checkpoints", &self.keep_checkpoints)
+            .field("models", &self.models)
+            .field("max_sweep_jobs", &self.max_sweep_jobs)
+            .field("worlds", &self.worlds)
+            .finish()
+    }
+}
+
 impl Default for ServerConfig {
     fn default() -> Self {
         Self {
@@ -171,4 +207,24 @@ pub fn load(path: &std::path::Path) -> anyhow::Result<ServerConfig> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ServerConfig;
+
+    #[test]
+    fn debug_shows_no_token() {
+        let config = ServerConfig {
+            token: Some("every-s3cret".into()),
+            worker_token: Some("w0rker-s3cret".into()),
+            ..ServerConfig::default()
+        };
+        let shown = format!("{config:?}");
+        assert!(!shown.contains("s3cret"), "{shown}");
+        assert!(
+            shown.contains("<set>") && shown.contains("read_token: None"),
+            "{shown}"
+        );
+    }
 }

@@ -24,7 +24,7 @@ export async function renderModels(main) {
     el('div', { class: 'toolbar' }, el('label', {}, 'checkpoint file ', fileInput), ' ', uploadButton),
     message,
     el('p', { class: 'muted' }, 'Evaluate with ', episodesInput, ' episodes (',
-      el('label', {}, meanInput, ' mean action instead of sampled'), '); the result appears under Evaluations.'),
+      el('label', {}, meanInput, ' deterministic action instead of sampled'), '); the result appears under Evaluations.'),
     el('table', { id: 'models' }, el('thead', {}, el('tr', {},
       ['id', 'name', 'algorithm', 'trained steps', 'size', 'added', 'sha256', ''].map((h) => el('th', {}, h)))), rows),
     lineage,

@@ -29,7 +29,7 @@ export async function renderRun(main, idText) {
   const recording = el('div', { id: 'recording' });
   const deleteButton = el('button', { type: 'button', id: 'delete-run', class: 'danger', onclick: () => remove() }, 'Delete run');
   const episodesInput = el('input', { type: 'text', inputmode: 'numeric', value: '100', name: 'eval-episodes', size: 6 });
-  // Evaluations sample the policy (the paper's way) unless the mean action is asked for.
+  // Evaluations sample the policy (the paper's way) unless the deterministic action is asked for.
   const meanInput = el('input', { type: 'checkbox', name: 'eval-deterministic' });
 
   const drawCharts = () => {
@@ -46,7 +46,7 @@ export async function renderRun(main, idText) {
     message,
     el('h2', {}, 'Checkpoints'),
     el('p', { class: 'muted' }, 'Evaluate with ', episodesInput, ' episodes (',
-      el('label', {}, meanInput, ' mean action instead of sampled'), '); the result appears under Evaluations.'),
+      el('label', {}, meanInput, ' deterministic action instead of sampled'), '); the result appears under Evaluations.'),
     el('table', { id: 'checkpoints' }, el('thead', {}, el('tr', {},
       ['id', 'steps', 'size', 'saved', ''].map((h) => el('th', {}, h)))), checkpoints),
     lineage,

@@ -393,8 +393,9 @@ fn behaviour_cloning_of_the_oracle_warms_up_a_ppo_policy() {
         "{stderr}"
     );
     assert!(dir.join("crm-ppo.safetensors").exists());
-    // The clone acts like the oracle on the task it saw: its mean action, which cloning fit
-    // (sampled at the start's noise, std 1, it presses in about a third of its episodes).
+    // The clone acts like the oracle on the task it saw: its deterministic palm action is the
+    // mean cloning fit, all a press needs (sampled at the start's noise, std 1, it presses in
+    // about a third of its episodes).
     let checkpoint = dir
         .join("crm-ppo.safetensors")
         .to_string_lossy()
@@ -608,7 +609,7 @@ fn a_short_seeded_run_on_a_hold_task_beats_the_untrained_policy() {
 }
 
 /// Evaluation samples the policy by default (the paper's way), seeded so that it repeats, and
-/// `--deterministic` takes the mean action; the report says which.
+/// `--deterministic` takes the deterministic action; the report says which.
 #[test]
 fn evaluation_samples_by_default_and_repeats_with_its_seed() {
     let eval = |extra: &[&str]| -> serde_json::Value {

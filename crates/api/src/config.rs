@@ -58,8 +58,8 @@ pub struct PpoConfig {
     /// Reward scaling by the running std of the discounted return (SB3 `VecNormalize`), one
     /// factor for both reward parts.
     pub norm_reward: bool,
-    /// How the learning rate falls over the run's steps: the paper's steps (default) or
-    /// CleanRL's linear anneal.
+    /// How the learning rate falls over the run's steps: the paper's steps (default),
+    /// CleanRL's linear anneal, or constant (Stable-Baselines3's default).
     pub lr_schedule: LrSchedule,
 }
 
@@ -73,6 +73,8 @@ pub enum LrSchedule {
     Paper,
     /// Linear to zero at the run's last step: CleanRL's `anneal_lr` (its default for PPO).
     Linear,
+    /// The same rate throughout: Stable-Baselines3's default (a float `learning_rate`).
+    Constant,
 }
 
 impl Default for PpoConfig {
@@ -106,13 +108,14 @@ impl PpoConfig {
     /// [`LrSchedule`]: the paper's 100% for the first 40%, 90% until 70%, and 80% for the rest
     /// (section V-B-2); or `1 - progress` of it (CleanRL's `anneal_lr`, which computes its
     /// fraction before the rollout, so its last update keeps `1 / iterations` where ours
-    /// takes none).
+    /// takes none); or all of it.
     pub fn learning_rate_at(&self, progress: f64) -> f64 {
         let factor = match self.lr_schedule {
             LrSchedule::Paper if progress < 0.4 => 1.0,
             LrSchedule::Paper if progress < 0.7 => 0.9,
             LrSchedule::Paper => 0.8,
             LrSchedule::Linear => (1.0 - progress).clamp(0.0, 1.0),
+            LrSchedule::Constant => 1.0,
         };
         self.learning_rate * factor
     }
@@ -328,6 +331,10 @@ mod tests {
         assert_eq!(config.learning_rate_at(0.0), 3e-4);
         assert!((config.learning_rate_at(0.25) - 2.25e-4).abs() < 1e-12);
         assert_eq!(config.learning_rate_at(1.0), 0.0);
+        let constant: PpoConfig =
+            serde_json::from_str(r#"{"learning_rate": 3e-4, "lr_schedule": "constant"}"#)
+                .expect("a constant schedule parses");
+        assert_eq!(constant.learning_rate_at(0.99), 3e-4);
         let err = serde_json::from_str::<PpoConfig>(r#"{"lr_schedule": "cosine"}"#)
             .expect_err("an unknown schedule is refused")
             .to_string();

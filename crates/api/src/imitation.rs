@@ -34,7 +34,7 @@ pub struct ImitationSpec {
     pub tasks: Vec<String>,
     /// Per task id, where the oracle moves the palm from the grasp location before it closes
     /// (m, world frame, each axis within [`MAX_SHIFT`]): for a task whose grasp holds only off
-    /// the point it arrives at, as the `palm-offset` example finds it (docs/WORLDS.md).
+    /// the point it arrives at, as the `palm-offset` example finds it (docs/notebook/worlds.md).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub shifts: BTreeMap<String, [f64; 3]>,
     /// The stages whose steps are cloned ([`STAGES`]: `approach`, `grasp`); empty: every

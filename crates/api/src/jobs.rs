@@ -136,7 +136,7 @@ pub struct TrainSpec {
     /// resumed run keeps its own. Then PPO learns it on as always. PPO learners of the
     /// grasping machine only (see [`check_start_log_std`]). A narrower noise set on a
     /// fine-tune keeps sampled actions on grasps that the learned noise breaks
-    /// (docs/WORLDS.md, "Sampled actions").
+    /// (docs/notebook/worlds.md, "Sampled actions").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start_log_std: Option<f64>,
     /// `scripted` (default, the paper's protocol) or `learned`.
@@ -248,10 +248,11 @@ pub struct EvalSpec {
     /// `scripted` (default, the paper's protocol) or `learned`.
     #[serde(default)]
     pub objective: ObjectiveMode,
-    /// Act with the policy's mean action. Default: sample the policy's actions, seeded by
-    /// `seed`, as the paper's evaluation does (the authors' `crm_ppo/evaluate.py` calls
-    /// Stable-Baselines3's `model.predict(obs)`, whose default is `deterministic=False`;
-    /// CleanRL's evaluations sample too).
+    /// Act with the policy's deterministic action (its mean; on a dimension the environment
+    /// takes the magnitude of, the sampled action's mean magnitude: `docs/LEARNING.md`).
+    /// Default: sample the policy's actions, seeded by `seed`, as the paper's evaluation does
+    /// (the authors' `crm_ppo/evaluate.py` calls Stable-Baselines3's `model.predict(obs)`,
+    /// whose default is `deterministic=False`; CleanRL's evaluations sample too).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub deterministic: bool,
     /// Seconds of steady hold the judge asks of hold tasks (see [`check_hold_s`]); absent:
@@ -292,15 +293,11 @@ pub struct Iteration {
     /// Episodes that ended in this iteration, and how many of them succeeded.
     pub episodes: u64,
     pub successes: u64,
-    /// Success over the last 100 training episodes, whatever the early-stop window (until
-    /// 2026-11-24 the window's rate: the logs of runs t, u and v in docs/learning/ hold the
-    /// rate over 1,000).
+    /// Success over the last 100 training episodes, whatever the early-stop window.
     pub success_rate_last_100: f64,
     /// Means over the episodes that ended in this iteration: the return, its split into
     /// intra-stage and transition rewards, and the length in control steps; `None` (JSON
-    /// null) when none ended. Iterations logged before 2026-11-25 hold 0 there instead, and
-    /// their split was the iteration's whole reward, unfinished episodes' too, over the
-    /// finished episodes.
+    /// null) when none ended.
     pub mean_return: Option<f64>,
     pub mean_intra_return: Option<f64>,
     pub mean_transition_return: Option<f64>,
@@ -314,8 +311,7 @@ pub struct Iteration {
     pub clipfrac: f64,
     pub learning_rate: f64,
     /// Each task's success rate over its last 50 training episodes (tasks not drawn yet are
-    /// left out), by task id: which tasks a run has learned and which it is stuck on. Empty
-    /// in iterations logged before 2026-11-24.
+    /// left out), by task id: which tasks a run has learned and which it is stuck on.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub task_success: BTreeMap<String, f64>,
 }
@@ -342,13 +338,13 @@ pub struct Row {
     /// Mean simulated seconds, the arm's scripted execution included.
     #[serde(default)]
     pub mean_sim_seconds: f64,
-    /// How this row's episodes ended, as [`EvalReport::outcomes`]. Empty in reports made
-    /// before 2026-11-24.
+    /// How this row's episodes ended, as [`EvalReport::outcomes`] (empty where a report
+    /// does not say).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub outcomes: BTreeMap<String, u64>,
     /// The share of these episodes the authors' judge (DexMobile: a rise within 1,000 physics
     /// steps once the grasp is ready, no hold; a press, a contact) would have passed, beside
-    /// ours (a 5 s steady hold). Absent in reports made before 2026-11-25.
+    /// ours (a 5 s steady hold), where the report gives it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub authors_judge: Option<f64>,
 }
@@ -399,11 +395,11 @@ pub struct EvalReport {
     /// Who executed the objective (`scripted` or `learned`).
     #[serde(default)]
     pub objective: ObjectiveMode,
-    /// Whether the policy acted with its mean action (`false`: sampled, the paper's way).
+    /// Whether the policy took its deterministic action (`false`: sampled, the paper's way).
     #[serde(default)]
     pub deterministic: bool,
     pub per_objective: BTreeMap<String, Row>,
-    /// The same per task (by id). Empty in reports made before 2026-11-23.
+    /// The same per task (by id).
     #[serde(default)]
     pub per_task: BTreeMap<String, Row>,
     /// How the episodes ended: the terminal stage reached (a failure with its cause:

@@ -8,6 +8,7 @@ pub mod checkpoint;
 pub mod curriculum;
 pub mod early_stop;
 pub mod error;
+pub mod folded;
 mod fused;
 pub mod gae;
 pub mod imitation;

@@ -151,6 +151,33 @@ impl Ppo {
         sample_policy(&self.net, states, stages, masks, noise)
     }
 
+    /// The deterministic action at one abstract state: the Gaussian's mean, and on the
+    /// dimensions marked in `folded` (those the environment takes the magnitude of) the
+    /// sampled action's mean magnitude ([`crate::folded::folded_mean`]). Zero outside `mask`.
+    pub fn act_folded(
+        &self,
+        state: &[f32],
+        stage: usize,
+        mask: &[f32],
+        folded: &[bool],
+    ) -> Result<Vec<f32>> {
+        let input = self.net.input(&[state.to_vec()], &[stage])?;
+        let means: Vec<f32> = self.net.mean(&input)?.squeeze(0)?.to_vec1()?;
+        let std = self.net.std()?;
+        Ok(means
+            .iter()
+            .enumerate()
+            .map(|(k, &m)| {
+                let live = mask.get(k).copied().unwrap_or(0.0);
+                if folded.get(k).copied().unwrap_or(false) {
+                    live * crate::folded::folded_mean(m, std.get(k).copied().unwrap_or(0.0))
+                } else {
+                    live * m
+                }
+            })
+            .collect())
+    }
+
     /// [`Self::act_batch`] for one state.
     pub fn act(
         &mut self,

@@ -221,3 +221,27 @@ fn a_short_seeded_sac_run_on_an_easy_task_beats_the_untrained_policy() {
         "success before {before}, after {after}"
     );
 }
+
+#[test]
+fn the_deterministic_action_folds_only_the_folded_dimensions() {
+    let layout = Layout::of(env().machine());
+    let config = PpoConfig {
+        hidden: vec![16, 16],
+        init_log_std: -0.5,
+        ..PpoConfig::default()
+    };
+    let mut ppo = Ppo::new(layout, config, 4).expect("ppo");
+    let (state, stage, mask) = (vec![-0.3, 0.8], 0, vec![1.0]);
+    let (mean, _) = ppo.act(&state, stage, &mask, true).expect("act");
+    let plain = ppo.act_folded(&state, stage, &mask, &[false]).expect("act");
+    assert_eq!(plain, mean, "nothing folded: the Gaussian's mean");
+    let folded = ppo.act_folded(&state, stage, &mask, &[true]).expect("act");
+    let std = ppo.net.std().expect("std")[0];
+    assert_eq!(folded, vec![crm_learn::folded::folded_mean(mean[0], std)]);
+    assert!(
+        folded[0] > mean[0].abs(),
+        "the noise closes too: {folded:?} {mean:?}"
+    );
+    let masked = ppo.act_folded(&state, stage, &[0.0], &[true]).expect("act");
+    assert_eq!(masked, vec![0.0], "outside the stage's action set");
+}

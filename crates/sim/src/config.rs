@@ -127,7 +127,8 @@ pub struct SimConfig {
     /// the swing turns the handle bottle of the paper's task 7 away from the hand; at the
     /// authors' 1 rad/s (`Dualcontrol.move_finger_joint`'s `maxVelocity`) the sampled
     /// policy's closing-only actions outrun it and CRM-PPO learned half as fast. Default
-    /// 5 rad/s, measured between the two (docs/WORLDS.md, "The handle bottle of `t07`").
+    /// 5 rad/s, measured between the two (docs/notebook/worlds.md, "The handle bottle of
+    /// `t07`").
     /// Hands without a relaxed pose start preshaped and are unaffected.
     pub preshape_speed: f32,
     /// Training's shortcut through the hold (0, the default, is off: the paper's full hold).
@@ -185,11 +186,56 @@ impl SimConfig {
         self.physics_dt * self.substeps as f32
     }
 
+    /// Whether finger actions only close (by `|a|`): the scripted protocol's, as the
+    /// authors' code. Under the learned protocol the policy must also be able to ease its
+    /// grip while it lifts, so the fingers open and close there.
+    pub fn closing_fingers(&self) -> bool {
+        self.finger_actions == FingerActions::Closing && self.protocol == Protocol::Scripted
+    }
+
+    /// Per dimension of the union action space ([`crate::observation::ACTIONS`]), whether
+    /// the environment acts on its magnitude only: the fingers where they only close. A
+    /// deterministic policy takes the sampled action's mean magnitude there
+    /// (`crm_learn::folded`).
+    pub fn folded_actions(&self) -> Vec<bool> {
+        let closing = self.closing_fingers();
+        (0..crate::observation::ACTIONS.len())
+            .map(|k| closing && k >= 3)
+            .collect()
+    }
+
     /// A configuration for unit tests: randomization off.
     pub fn deterministic() -> Self {
         Self {
             randomization: Randomization::off(),
             ..Self::default()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_closing_fingers_are_folded() {
+        let scripted = SimConfig::default();
+        assert!(scripted.closing_fingers());
+        let folded = scripted.folded_actions();
+        assert_eq!(folded.len(), crate::observation::ACTIONS.len());
+        assert_eq!(&folded[..3], &[false; 3], "the palm's steps are signed");
+        assert!(folded[3..].iter().all(|&f| f), "every finger only closes");
+        for config in [
+            SimConfig {
+                protocol: Protocol::Learned,
+                ..SimConfig::default()
+            },
+            SimConfig {
+                finger_actions: FingerActions::Signed,
+                ..SimConfig::default()
+            },
+        ] {
+            assert!(config.folded_actions().iter().all(|&f| !f));
         }
     }
 }

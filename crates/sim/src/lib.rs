@@ -51,5 +51,5 @@ pub use world::World;
 /// Version of the environment's dynamics and observation layout; checkpoints record it.
 /// `v2`: the paper's ready test and scripted objective execution, and policies that carry
 /// their observation normalizer. `v4`: friction anchors between the hand and the object
-/// (`stiction.rs`). (`v3` was a finger-range candidate, never shipped: docs/BENCHMARKS.md.)
+/// (`stiction.rs`). (`v3` was a finger-range candidate, never shipped.)
 pub const ENV_VERSION: &str = concat!("grasp-sim/", env!("CARGO_PKG_VERSION"), "/obs38/v4");

@@ -23,8 +23,8 @@ const LIFT_SPEED: f32 = 0.6;
 const LIFT_MARGIN: f32 = 0.02;
 /// Fractions of the grasp step with which a twist pushes along the tangent and backs off
 /// when the grip nears the fragility limit (0.2: the back-off that took the paper world's
-/// `t20-dispenser-twist` from 18 crushed episodes of 100 to 3; docs/BENCHMARKS.md, "The
-/// twist: the control step's torque").
+/// `t20-dispenser-twist` from 18 crushed episodes of 100 to 3; docs/notebook/benchmarks.md,
+/// "The twist: the control step's torque").
 const TWIST_PUSH: f32 = 0.5;
 const TWIST_BACK_OFF: f32 = 0.2;
 

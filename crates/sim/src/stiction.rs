@@ -3,7 +3,7 @@
 //! rapier solves friction at the velocity level: a sticking contact gets zero relative
 //! tangential velocity, but the position error that every substep leaves behind is never
 //! corrected, so an object held still in the hand creeps out of it over seconds
-//! (docs/BENCHMARKS.md, "The solver's contact settings against the hold's creep"). Engines
+//! (docs/notebook/benchmarks.md, "The solver's contact settings against the hold's creep"). Engines
 //! that hold grasps anchor each sticking contact (PhysX's friction anchors, Box2D v3's
 //! anchored friction): the friction constraint also steers the contact back to where it
 //! stuck. Here each hand body touching the object keeps the object's pose in its own frame
@@ -23,8 +23,8 @@ pub struct StictionConfig {
     /// On by default (environment v4).
     pub enabled: bool,
     /// Drift closed per second (1/s). Default 60: a quarter of the drift per physics step
-    /// (1/240 s), stable, and within 0.01 of the best of 3-100 measured (docs/BENCHMARKS.md,
-    /// "Friction anchors").
+    /// (1/240 s), stable, and within 0.01 of the best of 3-100 measured
+    /// (docs/notebook/benchmarks.md, "Friction anchors").
     pub gain: f32,
     /// Fastest correction (m/s). Default 0.2 (measured with `gain`).
     pub max_speed: f32,

@@ -15,6 +15,7 @@ use serde_json::json;
 
 use super::error::{ApiError, parse_id};
 use crate::AppState;
+use crate::errors::ErrorKind;
 use crate::uploads::UploadError;
 
 type Res = Result<Response, ApiError>;
@@ -148,19 +149,15 @@ pub async fn upload(
             other => return Err(ApiError::invalid(other, "unknown query parameter")),
         }
     }
-    let body = body.map_err(|rejection| ApiError {
-        status: rejection.status(),
-        code: if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
-            "too_large"
-        } else {
-            "invalid_body"
-        },
-        message: format!(
-            "{} (checkpoints up to {} bytes)",
-            rejection.body_text(),
-            state.config.max_checkpoint_bytes
-        ),
-        field: Some("body".into()),
+    let body = body.map_err(|rejection| {
+        ApiError::body(
+            ErrorKind::of_body(rejection.status()),
+            format!(
+                "{} (checkpoints up to {} bytes)",
+                rejection.body_text(),
+                state.config.max_checkpoint_bytes
+            ),
+        )
     })?;
     match crate::uploads::store(&state, &body, name).await {
         Ok((row, created)) => {
@@ -175,20 +172,14 @@ pub async fn upload(
             };
             Ok((status, Json(row)).into_response())
         }
-        Err(UploadError::Checkpoint(why)) => Err(ApiError {
-            status: if why.is_mismatch() {
-                StatusCode::UNPROCESSABLE_ENTITY
+        Err(UploadError::Checkpoint(why)) => Err(ApiError::body(
+            if why.is_mismatch() {
+                ErrorKind::EnvVersionMismatch
             } else {
-                StatusCode::BAD_REQUEST
+                ErrorKind::NotACheckpoint
             },
-            code: if why.is_mismatch() {
-                "env_version_mismatch"
-            } else {
-                "not_a_checkpoint"
-            },
-            message: why.to_string(),
-            field: Some("body".into()),
-        }),
+            why.to_string(),
+        )),
         Err(UploadError::Name(why)) => Err(ApiError::invalid("name", why)),
         Err(UploadError::Store(err)) => Err(ApiError::store("checkpoint", err)),
         Err(err @ UploadError::Io(_)) => Err(ApiError::internal(err)),

@@ -1,15 +1,15 @@
-//! The API's error: an HTTP status and `{"error": {"code", "message", "field"}}`.
+//! The API's error: a kind (`crate::errors`, which gives its HTTP status and code) and
+//! `{"error": {"code", "message", "field"}}`.
 
 use axum::Json;
-use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 
+use crate::errors::ErrorKind;
 use crate::store::StoreError;
 
 #[derive(Debug)]
 pub struct ApiError {
-    pub status: StatusCode,
-    pub code: &'static str,
+    pub kind: ErrorKind,
     pub message: String,
     pub field: Option<String>,
 }
@@ -18,8 +18,7 @@ impl ApiError {
     /// A request value that is malformed or out of range; names the field.
     pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
         Self {
-            status: StatusCode::BAD_REQUEST,
-            code: "invalid_field",
+            kind: ErrorKind::InvalidField,
             message: message.into(),
             field: Some(field.into()),
         }
@@ -27,8 +26,7 @@ impl ApiError {
 
     pub fn not_found(field: impl Into<String>, message: impl Into<String>) -> Self {
         Self {
-            status: StatusCode::NOT_FOUND,
-            code: "not_found",
+            kind: ErrorKind::NotFound,
             message: message.into(),
             field: Some(field.into()),
         }
@@ -36,8 +34,7 @@ impl ApiError {
 
     pub fn conflict(message: impl Into<String>) -> Self {
         Self {
-            status: StatusCode::CONFLICT,
-            code: "conflict",
+            kind: ErrorKind::Conflict,
             message: message.into(),
             field: None,
         }
@@ -55,8 +52,7 @@ impl ApiError {
     /// 503: the coordinator is at a limit of its own; `field` names what.
     pub fn unavailable(field: impl Into<String>, message: impl Into<String>) -> Self {
         Self {
-            status: StatusCode::SERVICE_UNAVAILABLE,
-            code: "unavailable",
+            kind: ErrorKind::Unavailable,
             message: message.into(),
             field: Some(field.into()),
         }
@@ -65,8 +61,7 @@ impl ApiError {
     /// 429: a client over its request budget (`api/rate.rs`).
     pub fn rate_limited() -> Self {
         Self {
-            status: StatusCode::TOO_MANY_REQUESTS,
-            code: "rate_limited",
+            kind: ErrorKind::RateLimited,
             message: "too many requests from this address; retry after the seconds in Retry-After"
                 .into(),
             field: None,
@@ -75,8 +70,7 @@ impl ApiError {
 
     pub fn unauthorized() -> Self {
         Self {
-            status: StatusCode::UNAUTHORIZED,
-            code: "unauthorized",
+            kind: ErrorKind::Unauthorized,
             message: "this call needs the header `Authorization: Bearer <token>`".into(),
             field: Some("authorization".into()),
         }
@@ -85,8 +79,7 @@ impl ApiError {
     /// A known token without the scope the call needs.
     pub fn forbidden(scope: crate::auth::Scope) -> Self {
         Self {
-            status: StatusCode::FORBIDDEN,
-            code: "forbidden",
+            kind: ErrorKind::Forbidden,
             message: format!(
                 "this token may not {}; this call needs a token with the {} scope",
                 match scope {
@@ -103,10 +96,18 @@ impl ApiError {
     pub fn internal(err: impl std::fmt::Display) -> Self {
         tracing::error!(%err, "internal error");
         Self {
-            status: StatusCode::INTERNAL_SERVER_ERROR,
-            code: "internal",
+            kind: ErrorKind::Internal,
             message: err.to_string(),
             field: None,
+        }
+    }
+
+    /// An error of `kind` about the request's body.
+    pub fn body(kind: ErrorKind, message: impl Into<String>) -> Self {
+        Self {
+            kind,
+            message: message.into(),
+            field: Some("body".into()),
         }
     }
 
@@ -116,8 +117,7 @@ impl ApiError {
             StoreError::NotFound => Self::not_found("id", format!("no such {what}")),
             StoreError::Conflict(state) => Self::conflict(format!("the {what} is {state}")),
             StoreError::KeyReused(job) => Self {
-                status: StatusCode::CONFLICT,
-                code: "idempotency_key_reused",
+                kind: ErrorKind::IdempotencyKeyReused,
                 message: format!(
                     "this Idempotency-Key was used for another request, which created job {job}; use a new key for a new job"
                 ),
@@ -131,9 +131,9 @@ impl ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let body = serde_json::json!({
-            "error": {"code": self.code, "message": self.message, "field": self.field}
+            "error": {"code": self.kind.code(), "message": self.message, "field": self.field}
         });
-        (self.status, Json(body)).into_response()
+        (self.kind.http(), Json(body)).into_response()
     }
 }
 

@@ -17,6 +17,7 @@ use serde_json::Value;
 
 use super::error::{ApiError, parse_id};
 use crate::AppState;
+use crate::errors::ErrorKind;
 use crate::store::{JobFilter, NewJob};
 
 /// Largest training budget a job may ask for.
@@ -328,12 +329,7 @@ fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
 
 /// A request's JSON body, or the error naming `body` (over the size limit: 413).
 pub(super) fn json_body(body: Result<Bytes, BytesRejection>) -> Result<Value, ApiError> {
-    let body = body.map_err(|e| ApiError {
-        status: e.status(),
-        code: "bad_body",
-        message: e.body_text(),
-        field: Some("body".into()),
-    })?;
+    let body = body.map_err(|e| ApiError::body(ErrorKind::of_body(e.status()), e.body_text()))?;
     serde_json::from_slice(&body).map_err(|e| ApiError::invalid("body", format!("not JSON: {e}")))
 }
 

@@ -16,6 +16,7 @@ use tonic::{Request, Response, Status, Streaming};
 
 use crate::AppState;
 use crate::auth::{Scope, Tokens, Verdict};
+use crate::errors::ErrorKind;
 use crate::secrets;
 use crate::store::{Lease, NewCheckpoint, StoreError};
 
@@ -52,12 +53,10 @@ impl tonic::service::Interceptor for TokenCheck {
         match self.tokens.check(given, self.scope) {
             Verdict::Allowed => Ok(request),
             Verdict::Unauthenticated => {
-                Err(Status::unauthenticated("missing or wrong bearer token"))
+                Err(ErrorKind::Unauthorized.status("missing or wrong bearer token"))
             }
-            Verdict::Forbidden => Err(Status::permission_denied(format!(
-                "this token lacks the {} scope",
-                self.scope.name()
-            ))),
+            Verdict::Forbidden => Err(ErrorKind::Forbidden
+                .status(format!("this token lacks the {} scope", self.scope.name()))),
         }
     }
 }
@@ -81,14 +80,15 @@ pub struct CoordinatorService {
 }
 
 fn status(err: StoreError) -> Status {
-    match err {
-        StoreError::NotFound => Status::not_found("unknown worker, job or checkpoint"),
-        StoreError::Conflict(state) => Status::failed_precondition(format!("job is {state}")),
+    let message = match &err {
+        StoreError::NotFound => "unknown worker, job or checkpoint".to_string(),
+        StoreError::Conflict(state) => format!("job is {state}"),
         other => {
             tracing::error!(err = %other, "store error");
-            Status::internal(other.to_string())
+            other.to_string()
         }
-    }
+    };
+    ErrorKind::of_store(&err).status(message)
 }
 
 impl CoordinatorService {
@@ -110,7 +110,7 @@ impl CoordinatorService {
         {
             Ok(hash)
         } else {
-            Err(Status::failed_precondition(format!(
+            Err(ErrorKind::Conflict.status(format!(
                 "worker {worker} does not hold job {job} under this lease token"
             )))
         }
@@ -128,7 +128,7 @@ impl CoordinatorService {
         {
             Ok(())
         } else {
-            Err(Status::permission_denied(format!(
+            Err(ErrorKind::Forbidden.status(format!(
                 "worker_secret: not the secret worker {worker} was registered with"
             )))
         }
@@ -143,8 +143,9 @@ impl Coordinator for CoordinatorService {
     ) -> Result<Response<pb::RegisterReply>, Status> {
         let r = request.into_inner();
         crm_api::check_name(&r.name)
-            .map_err(|why| Status::invalid_argument(format!("name: {why}")))?;
-        let secret = secrets::new_secret().map_err(|e| Status::internal(e.to_string()))?;
+            .map_err(|why| ErrorKind::InvalidField.status(format!("name: {why}")))?;
+        let secret =
+            secrets::new_secret().map_err(|e| ErrorKind::Internal.status(e.to_string()))?;
         let worker = self
             .state
             .store
@@ -173,7 +174,7 @@ impl Coordinator for CoordinatorService {
         let worker = r.worker_id;
         self.require_worker(&worker, &r.worker_secret).await?;
         let store = &self.state.store;
-        let token = secrets::new_secret().map_err(|e| Status::internal(e.to_string()))?;
+        let token = secrets::new_secret().map_err(|e| ErrorKind::Internal.status(e.to_string()))?;
         let hash = secrets::hash(&token);
         let leased = store.lease(&worker, &hash, self.ttl_ms()).await;
         let Some(job) = leased.map_err(status)? else {
@@ -252,12 +253,12 @@ impl Coordinator for CoordinatorService {
             };
             match message.body {
                 Some(progress::Body::IterationJson(json)) => {
-                    let it: crm_api::Iteration = serde_json::from_str(&json)
-                        .map_err(|e| Status::invalid_argument(format!("iteration_json: {e}")))?;
+                    let it: crm_api::Iteration = serde_json::from_str(&json).map_err(|e| {
+                        ErrorKind::InvalidField.status(format!("iteration_json: {e}"))
+                    })?;
                     if i64::try_from(it.steps).is_err() || i64::try_from(it.iteration).is_err() {
-                        return Err(Status::invalid_argument(
-                            "iteration_json: steps and iteration must be below 2^63",
-                        ));
+                        return Err(ErrorKind::InvalidField
+                            .status("iteration_json: steps and iteration must be below 2^63"));
                     }
                     let fraction = (it.steps as f64 / budget.max(1) as f64).min(1.0);
                     store
@@ -294,16 +295,15 @@ impl Coordinator for CoordinatorService {
                 }
                 Some(progress::Body::Phase(phase)) => {
                     if phase.name.is_empty() || phase.name.len() > 64 || phase.done > phase.total {
-                        return Err(Status::invalid_argument(
-                            "phase: a name of 1 to 64 bytes and done <= total",
-                        ));
+                        return Err(ErrorKind::InvalidField
+                            .status("phase: a name of 1 to 64 bytes and done <= total"));
                     }
                     store
                         .set_phase(key.1, &phase.name, phase.done, phase.total)
                         .await
                         .map_err(status)?;
                 }
-                None => return Err(Status::invalid_argument("progress: empty body")),
+                None => return Err(ErrorKind::InvalidField.status("progress: empty body")),
             }
             accepted += 1;
             self.state.notify();
@@ -320,23 +320,19 @@ impl Coordinator for CoordinatorService {
             Some(pb::CheckpointChunk {
                 body: Some(checkpoint_chunk::Body::Meta(meta)),
             }) => meta,
-            _ => return Err(Status::invalid_argument("the first chunk must carry meta")),
+            _ => return Err(ErrorKind::InvalidField.status("the first chunk must carry meta")),
         };
         self.require_lease(&meta.worker_id, meta.job_id, &meta.lease_token)
             .await?;
         if crm_api::Algorithm::parse(&meta.algorithm).is_none() {
-            return Err(Status::invalid_argument(
-                "meta.algorithm: unknown algorithm",
-            ));
+            return Err(ErrorKind::InvalidField.status("meta.algorithm: unknown algorithm"));
         }
         let Ok(steps) = i64::try_from(meta.steps) else {
-            return Err(Status::invalid_argument("meta.steps: must be below 2^63"));
+            return Err(ErrorKind::InvalidField.status("meta.steps: must be below 2^63"));
         };
         let max = self.state.config.max_checkpoint_bytes;
         if meta.size > max {
-            return Err(Status::invalid_argument(format!(
-                "meta.size: over {max} bytes"
-            )));
+            return Err(ErrorKind::InvalidField.status(format!("meta.size: over {max} bytes")));
         }
         let dir = self.state.store.checkpoint_dir();
         let name = format!(
@@ -348,7 +344,7 @@ impl Coordinator for CoordinatorService {
         let partial = dir.join(format!("{name}.partial"));
         let mut file = tokio::fs::File::create(&partial)
             .await
-            .map_err(|e| Status::internal(e.to_string()))?;
+            .map_err(|e| ErrorKind::Internal.status(e.to_string()))?;
         let mut written = 0u64;
         // The file's hash, and its first bytes up to the end of the safetensors header.
         let mut hasher = Sha256::new();
@@ -357,11 +353,11 @@ impl Coordinator for CoordinatorService {
         let result: Result<(), Status> = async {
             while let Some(chunk) = stream.message().await? {
                 let Some(checkpoint_chunk::Body::Data(data)) = chunk.body else {
-                    return Err(Status::invalid_argument("only data chunks after meta"));
+                    return Err(ErrorKind::InvalidField.status("only data chunks after meta"));
                 };
                 written += data.len() as u64;
                 if written > meta.size {
-                    return Err(Status::invalid_argument("more bytes than meta.size"));
+                    return Err(ErrorKind::InvalidField.status("more bytes than meta.size"));
                 }
                 hasher.update(&data);
                 let mut offset = 0;
@@ -375,20 +371,18 @@ impl Coordinator for CoordinatorService {
                 }
                 file.write_all(&data)
                     .await
-                    .map_err(|e| Status::internal(e.to_string()))?;
+                    .map_err(|e| ErrorKind::Internal.status(e.to_string()))?;
             }
             if written != meta.size {
-                return Err(Status::invalid_argument(format!(
-                    "got {written} bytes, meta.size says {}",
-                    meta.size
-                )));
+                return Err(ErrorKind::InvalidField
+                    .status(format!("got {written} bytes, meta.size says {}", meta.size)));
             }
             // Checked as an uploaded checkpoint is: a file its evaluations could not load
             // is refused now, not when a worker tries.
             let info = crm_api::checkpoint::inspect(&prefix, written)
-                .map_err(|e| Status::invalid_argument(format!("checkpoint: {e}")))?;
+                .map_err(|e| ErrorKind::InvalidField.status(format!("checkpoint: {e}")))?;
             if info.algorithm.name() != meta.algorithm {
-                return Err(Status::invalid_argument(format!(
+                return Err(ErrorKind::InvalidField.status(format!(
                     "meta.algorithm: {:?}, the checkpoint says {:?}",
                     meta.algorithm,
                     info.algorithm.name()
@@ -396,10 +390,10 @@ impl Coordinator for CoordinatorService {
             }
             file.sync_all()
                 .await
-                .map_err(|e| Status::internal(e.to_string()))?;
+                .map_err(|e| ErrorKind::Internal.status(e.to_string()))?;
             tokio::fs::rename(&partial, dir.join(&name))
                 .await
-                .map_err(|e| Status::internal(e.to_string()))
+                .map_err(|e| ErrorKind::Internal.status(e.to_string()))
         }
         .await;
         if let Err(err) = result {
@@ -463,7 +457,7 @@ impl Coordinator for CoordinatorService {
             .map_err(status)?;
         let bytes = tokio::fs::read(self.state.store.checkpoint_path(&row))
             .await
-            .map_err(|e| Status::internal(e.to_string()))?;
+            .map_err(|e| ErrorKind::Internal.status(e.to_string()))?;
         let meta = pb::CheckpointChunk {
             body: Some(checkpoint_chunk::Body::Meta(pb::CheckpointMeta {
                 job_id: row.job_id.unwrap_or(0),
@@ -490,7 +484,7 @@ impl Coordinator for CoordinatorService {
     ) -> Result<Response<pb::CompleteReply>, Status> {
         let r = request.into_inner();
         if serde_json::from_str::<serde_json::Value>(&r.result_json).is_err() {
-            return Err(Status::invalid_argument("result_json: not JSON"));
+            return Err(ErrorKind::InvalidField.status("result_json: not JSON"));
         }
         let hash = self
             .require_lease(&r.worker_id, r.job_id, &r.lease_token)

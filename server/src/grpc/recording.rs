@@ -6,6 +6,7 @@ use crm_proto::pb::{self, recording_chunk};
 use tonic::{Request, Response, Status, Streaming};
 
 use super::{CoordinatorService, status};
+use crate::errors::ErrorKind;
 
 /// Most bytes one append may carry.
 pub const MAX_APPEND_BYTES: u64 = 64 * 1024 * 1024;
@@ -20,14 +21,14 @@ impl CoordinatorService {
             Some(pb::RecordingChunk {
                 body: Some(recording_chunk::Body::Meta(meta)),
             }) => meta,
-            _ => return Err(Status::invalid_argument("the first chunk must carry meta")),
+            _ => return Err(ErrorKind::InvalidField.status("the first chunk must carry meta")),
         };
         self.require_lease(&meta.worker_id, meta.job_id, &meta.lease_token)
             .await?;
         if meta.size == 0 || meta.size > MAX_APPEND_BYTES {
-            return Err(Status::invalid_argument(format!(
-                "meta.size: 1 to {MAX_APPEND_BYTES} bytes"
-            )));
+            return Err(
+                ErrorKind::InvalidField.status(format!("meta.size: 1 to {MAX_APPEND_BYTES} bytes"))
+            );
         }
         let stored = self
             .state
@@ -38,22 +39,22 @@ impl CoordinatorService {
             .map_or(0, |r| r.size as u64);
         let cap = self.state.config.max_recording_bytes;
         if stored + meta.size > cap {
-            return Err(Status::resource_exhausted(format!(
+            return Err(ErrorKind::TooLarge.status(format!(
                 "the job's recording would pass {cap} bytes (max_recording_bytes)"
             )));
         }
         let mut bytes = Vec::with_capacity(meta.size as usize);
         while let Some(chunk) = stream.message().await? {
             let Some(recording_chunk::Body::Data(data)) = chunk.body else {
-                return Err(Status::invalid_argument("only data chunks after meta"));
+                return Err(ErrorKind::InvalidField.status("only data chunks after meta"));
             };
             if (bytes.len() + data.len()) as u64 > meta.size {
-                return Err(Status::invalid_argument("more bytes than meta.size"));
+                return Err(ErrorKind::InvalidField.status("more bytes than meta.size"));
             }
             bytes.extend_from_slice(&data);
         }
         if bytes.len() as u64 != meta.size {
-            return Err(Status::invalid_argument(format!(
+            return Err(ErrorKind::InvalidField.status(format!(
                 "got {} bytes, meta.size says {}",
                 bytes.len(),
                 meta.size

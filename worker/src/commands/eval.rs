@@ -30,8 +30,9 @@ pub struct EvalArgs {
     /// pick) or a topology name forced on every task.
     #[arg(long)]
     pub topology: Option<String>,
-    /// Act with the policy's mean action instead of sampling it (the default samples, seeded
-    /// by `--seed`, as the paper's evaluation does).
+    /// Act with the policy's deterministic action instead of sampling it (its mean, folded
+    /// where the environment folds: docs/LEARNING.md; the default samples, seeded by
+    /// `--seed`, as the paper's evaluation does).
     #[arg(long)]
     pub deterministic: bool,
     #[arg(long)]

@@ -2,7 +2,7 @@
 //! are not demonstrated, each step labelled with its mean action. Cloned beside the oracle's
 //! demonstrations they hold a trained policy to what it does there: one network serves every
 //! task and stage, so a regression on one task's rows alone moves every weight (measured in
-//! docs/WORLDS.md, "Teaching `t07` by demonstration").
+//! docs/notebook/worlds.md, "Teaching `t07` by demonstration").
 
 use crm_learn::Demos;
 use grasp_sim::GraspEnv;

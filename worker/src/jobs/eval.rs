@@ -25,6 +25,10 @@ pub struct LoadedPolicy {
     pub machine: crm::Machine,
     pub algorithm: String,
     pub trained_steps: u64,
+    /// Union action dimensions the environment takes the magnitude of
+    /// ([`grasp_sim::SimConfig::folded_actions`]): a deterministic PPO action takes the
+    /// sampled action's mean magnitude there (`crm_learn::folded`).
+    pub folded: Vec<bool>,
 }
 
 impl LoadedPolicy {
@@ -64,11 +68,13 @@ impl LoadedPolicy {
             machine,
             algorithm: header.algorithm,
             trained_steps: header.steps,
+            folded: env.config().folded_actions(),
         })
     }
 
     /// The policy's action, zero outside the stage's action set: sampled with `noise`, or
-    /// without it the deterministic one (the Gaussian's mean; SAC: `tanh` of it).
+    /// without it the deterministic one (the Gaussian's mean, the mean magnitude of a sampled
+    /// action on the [`Self::folded`] dimensions; SAC: `tanh` of the mean).
     pub fn act(
         &mut self,
         state: &[f32],
@@ -77,7 +83,7 @@ impl LoadedPolicy {
         noise: Option<&mut Noise>,
     ) -> anyhow::Result<Vec<f32>> {
         let action = match (&mut self.net, noise) {
-            (PolicyNet::Ppo(ppo), None) => ppo.act(state, stage, mask, true)?.0,
+            (PolicyNet::Ppo(ppo), None) => ppo.act_folded(state, stage, mask, &self.folded)?,
             (PolicyNet::Ppo(ppo), Some(noise)) => ppo.act_one(state, stage, mask, noise)?.0,
             (PolicyNet::Sac(nets), noise) => {
                 let input = nets.input(&[state.to_vec()], &[stage])?;
@@ -191,6 +197,7 @@ pub fn evaluate_in(
     }
     let benchmark = env.benchmark()?;
     let mut policy = LoadedPolicy::load(path, env)?;
+    policy.folded = config.folded_actions();
     let (algorithm, trained_steps) = (policy.algorithm.clone(), policy.trained_steps);
     let machine = policy.machine.clone();
     let mut grasp = GraspEnv::new(benchmark.clone(), config);

@@ -79,7 +79,7 @@ impl GraspEnv {
             return false;
         };
         let shape = self.hand_shape();
-        self.closing_fingers()
+        self.config.closing_fingers()
             && shape.iter().any(|f| f.active)
             && (0..5)
                 .filter(|&f| shape[f].active)

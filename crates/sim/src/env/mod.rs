@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use rapier3d::prelude::*;
 
 use crate::benchmark::{Benchmark, FingerShape, Objective, Task, Topology};
-use crate::config::{FingerActions, Protocol, SimConfig};
+use crate::config::{Protocol, SimConfig};
 use crate::contacts::{ContactMetrics, object_contacts};
 use crate::error::{Error, Result};
 use crate::events::{FailCause, Judge, Snapshot};
@@ -339,7 +339,7 @@ impl GraspEnv {
             clip(action[1], MAX_PALM_STEP),
             clip(action[2], MAX_PALM_STEP),
         );
-        let closing = self.closing_fingers();
+        let closing = self.config.closing_fingers();
         let fingers: [f32; 5] = std::array::from_fn(|finger| {
             let step = clip(action[3 + finger], MAX_FINGER_STEP);
             if closing { step.abs() } else { step }
@@ -357,13 +357,6 @@ impl GraspEnv {
             events,
             truncated: self.steps >= self.config.max_episode_steps,
         })
-    }
-
-    /// Whether finger actions only close. Closing-only fingers are the scripted protocol's:
-    /// under the learned one the policy must also be able to ease its grip while it lifts.
-    fn closing_fingers(&self) -> bool {
-        self.config.finger_actions == FingerActions::Closing
-            && self.config.protocol == Protocol::Scripted
     }
 
     /// Moves the fingers' commands toward the topology's preshape by at most one control

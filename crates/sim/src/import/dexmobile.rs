@@ -304,7 +304,7 @@ fn benchmark(repo: &Path, csv_path: &Path, rows: &[Row]) -> Result<(Value, Value
                 // A twist turns a part of an anchored object (a cap, a pump, a lever): the
                 // hand does not carry it, so it is sturdy whatever its category (over 3 seeds
                 // per task the oracle crushed 10 objects with them `normal`, 2 `sturdy`:
-                // docs/WORLDS.md).
+                // docs/notebook/worlds.md).
                 let fragility = if anchored { "sturdy" } else { cat.fragility };
                 let turn = q_obj * file.origin.1;
                 let flags: serde_json::Map<String, Value> = cat

@@ -231,7 +231,7 @@ pub fn profile(description: &Description) -> Result<Profile, String> {
         // hand's (3 N m/rad, 0.2 N m), for links of 25-410 g; the oracle over 3 seeds per task
         // hardly depends on them once fixed and held links are welded (0.506 with the
         // built-in hand's, 0.519 with these, with 0.3 N m, and with 30 N m/rad and 1 N m;
-        // docs/WORLDS.md). The authors drive every joint by position at 100,000 N.
+        // docs/notebook/worlds.md). The authors drive every joint by position at 100,000 N.
         wrist: Wrist::BUILTIN,
         motor: Motor {
             stiffness: 10.0,
