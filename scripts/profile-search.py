@@ -1,0 +1,123 @@
+#!/usr/bin/env python3
+"""A random search over a hand profile's free choices, judged by the scripted oracle.
+
+usage: scripts/profile-search.py WORLD OUT.jsonl --seconds S [--workers N] [--seeds K]
+                                 [--held JOINT=LO:HI ...] [--box X0:X1,Y0:Y1,Z0:Z1]
+
+For each sample it writes a copy of WORLD's `hand.json` with the grasp point drawn from
+`--box` (palm frame, m), each `--held` joint drawn from its range, the motors' torque from
+{0.2, 0.35, 0.5, 0.7} N m and every topology's closed commands at 60%, 80% or 100% of each
+finger's range, runs `crm oracle --world COPY --json --seeds K`, and appends the sample and its
+success to OUT.jsonl (one JSON line each). The best line is a profile to try with more seeds.
+`crm` is the release build (`CARGO_TARGET_DIR`, else `target/`); the description is found as
+the world finds it (`CRM_ASSETS`). docs/WORLDS.md, "Bring your hand", has the Allegro search.
+"""
+
+import argparse
+import json
+import multiprocessing
+import os
+import random
+import shutil
+import subprocess
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def crm_binary():
+    target = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
+    return os.path.join(target, "release", "crm")
+
+
+def span(text, name):
+    try:
+        lo, hi = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise SystemExit(f"{name}: expected LO:HI, got {text!r}")
+    if not lo <= hi:
+        raise SystemExit(f"{name}: LO must not exceed HI in {text!r}")
+    return lo, hi
+
+
+def sample(rng, args):
+    box = [span(part, "--box") for part in args.box.split(",")]
+    if len(box) != 3:
+        raise SystemExit(f"--box: expected three LO:HI spans, got {args.box!r}")
+    return {
+        "grasp_point": [round(rng.uniform(*axis), 4) for axis in box],
+        "held": {j: round(rng.uniform(*span(r, "--held")), 3) for j, r in args.held},
+        "torque": rng.choice([0.2, 0.35, 0.5, 0.7]),
+        "close": rng.choice([0.6, 0.8, 1.0]),
+    }
+
+
+def profile(base, world_dir, p):
+    hand = json.loads(json.dumps(base))
+    description = hand["description"]
+    if not os.path.isabs(description) and os.path.exists(os.path.join(world_dir, description)):
+        hand["description"] = os.path.join(world_dir, description)
+    hand["grasp_point"] = p["grasp_point"]
+    hand["held"] = {**hand.get("held", {}), **p["held"]}
+    hand["motor"]["torque"] = p["torque"]
+    for topology in hand["topologies"].values():
+        for finger in list(topology.get("closed", {})):
+            lo, hi = hand["fingers"][finger]["range"]
+            topology["closed"][finger] = round(lo + p["close"] * (hi - lo) * 0.999, 3)
+    return hand
+
+
+def run(job):
+    index, args = job
+    world_dir = os.path.abspath(args.world)
+    world = json.load(open(os.path.join(world_dir, "world.json")))
+    base = json.load(open(os.path.join(world_dir, world["hand"])))
+    p = sample(random.Random(index), args)
+    with tempfile.TemporaryDirectory() as scratch:
+        for name in os.listdir(world_dir):
+            if name != world["hand"]:
+                source = os.path.join(world_dir, name)
+                if os.path.isfile(source):
+                    shutil.copy(source, scratch)
+        json.dump(profile(base, world_dir, p), open(os.path.join(scratch, world["hand"]), "w"))
+        done = subprocess.run(
+            [crm_binary(), "oracle", "--world", scratch, "--json", "--seeds", str(args.seeds)],
+            capture_output=True, text=True, timeout=1800)
+    if done.returncode != 0:
+        return {"sample": index, "params": p, "error": done.stderr.strip()[-400:]}
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    return {"sample": index, "params": p, "success": report["success_rate"],
+            "per_objective": {k: v["success_rate"] for k, v in report["per_objective"].items()}}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("world")
+    parser.add_argument("out")
+    parser.add_argument("--seconds", type=float, required=True)
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--first", type=int, default=0, help="the first sample's seed")
+    parser.add_argument("--box", default="0.0:0.1,-0.03:0.03,-0.1:0.03")
+    parser.add_argument("--held", action="append", default=[], metavar="JOINT=LO:HI")
+    args = parser.parse_args()
+    held = []
+    for item in args.held:
+        joint, _, rng = item.partition("=")
+        span(rng, "--held")
+        held.append((joint, rng))
+    args.held = held
+    start = time.time()
+    with multiprocessing.Pool(args.workers) as pool, open(args.out, "w") as out:
+        jobs = ((i, args) for i in range(args.first, args.first + 10**6))
+        for result in pool.imap_unordered(run, jobs):
+            out.write(json.dumps(result) + "\n")
+            out.flush()
+            if time.time() - start > args.seconds:
+                pool.terminate()
+                break
+
+
+if __name__ == "__main__":
+    main()
