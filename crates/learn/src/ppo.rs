@@ -161,10 +161,18 @@ impl Ppo {
         mask: &[f32],
         folded: &[bool],
     ) -> Result<Vec<f32>> {
-        let input = self.net.input(&[state.to_vec()], &[stage])?;
-        let means: Vec<f32> = self.net.mean(&input)?.squeeze(0)?.to_vec1()?;
+        let (means, _) = sample_policy(
+            &self.net,
+            &[state.to_vec()],
+            &[stage],
+            &[mask.to_vec()],
+            None,
+        )?;
         let std = self.net.std()?;
         Ok(means
+            .first()
+            .map(Vec::as_slice)
+            .unwrap_or_default()
             .iter()
             .enumerate()
             .map(|(k, &m)| {

@@ -112,18 +112,24 @@ impl ApiError {
     }
 
     /// A store error on the resource named `what` (`job`, `checkpoint`).
+    /// Its kind is [`ErrorKind::of_store`]'s, as the gRPC service's is.
     pub fn store(what: &str, err: StoreError) -> Self {
-        match err {
-            StoreError::NotFound => Self::not_found("id", format!("no such {what}")),
-            StoreError::Conflict(state) => Self::conflict(format!("the {what} is {state}")),
-            StoreError::KeyReused(job) => Self {
-                kind: ErrorKind::IdempotencyKeyReused,
-                message: format!(
+        let kind = ErrorKind::of_store(&err);
+        let (message, field) = match err {
+            StoreError::NotFound => (format!("no such {what}"), Some("id")),
+            StoreError::Conflict(state) => (format!("the {what} is {state}"), None),
+            StoreError::KeyReused(job) => (
+                format!(
                     "this Idempotency-Key was used for another request, which created job {job}; use a new key for a new job"
                 ),
-                field: Some("Idempotency-Key".into()),
-            },
-            other => Self::internal(other),
+                Some("Idempotency-Key"),
+            ),
+            other => return Self::internal(other),
+        };
+        Self {
+            kind,
+            message,
+            field: field.map(str::to_string),
         }
     }
 }

@@ -8,8 +8,8 @@ use anyhow::{Context, bail};
 use candle_core::{Device, Tensor};
 use crm_api::{EvalReport, EvalSpec, Row};
 use crm_learn::{Actor, Checkpoint, Layout, Noise, Ppo, PpoConfig, SacNets};
-use grasp_sim::GraspEnv;
 use grasp_sim::benchmark::Objective;
+use grasp_sim::{GraspEnv, SimConfig};
 
 use crate::commands::EnvArgs;
 
@@ -32,8 +32,9 @@ pub struct LoadedPolicy {
 }
 
 impl LoadedPolicy {
-    /// Loads `path` for the machine its algorithm trains in (the flat one for `ppo`).
-    pub fn load(path: &Path, env: &EnvArgs) -> anyhow::Result<Self> {
+    /// Loads `path` for the machine its algorithm trains in (the flat one for `ppo`), to act
+    /// in the world's settings `config` (which say the dimensions it folds).
+    pub fn load(path: &Path, env: &EnvArgs, config: &SimConfig) -> anyhow::Result<Self> {
         let header = Checkpoint::read_header(path)?;
         super::check_world(&header, env.world()?, path)?;
         let algorithm = header.algorithm;
@@ -68,7 +69,7 @@ impl LoadedPolicy {
             machine,
             algorithm: header.algorithm,
             trained_steps: header.steps,
-            folded: env.config().folded_actions(),
+            folded: config.folded_actions(),
         })
     }
 
@@ -188,7 +189,7 @@ pub fn evaluate_in(
     path: &Path,
     spec: &EvalSpec,
     env: &EnvArgs,
-    config: grasp_sim::SimConfig,
+    config: SimConfig,
     recorder: Option<crate::record::SharedRecorder>,
     mut progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
 ) -> anyhow::Result<EvalReport> {
@@ -196,8 +197,7 @@ pub fn evaluate_in(
         bail!("episodes must be positive");
     }
     let benchmark = env.benchmark()?;
-    let mut policy = LoadedPolicy::load(path, env)?;
-    policy.folded = config.folded_actions();
+    let mut policy = LoadedPolicy::load(path, env, &config)?;
     let (algorithm, trained_steps) = (policy.algorithm.clone(), policy.trained_steps);
     let machine = policy.machine.clone();
     let mut grasp = GraspEnv::new(benchmark.clone(), config);

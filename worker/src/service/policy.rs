@@ -8,6 +8,7 @@ use std::sync::Mutex;
 
 use crm_proto::pb;
 use crm_proto::pb::policy_server::{Policy, PolicyServer};
+use crm_server::errors::ErrorKind;
 use grasp_sim::observation::{ACTIONS, FEATURES};
 use tonic::{Request, Response, Status};
 
@@ -23,7 +24,7 @@ impl PolicyService {
     /// Loads `path` for the world of `env` (its hand, spec and sensors must be the ones the
     /// checkpoint was trained with).
     pub fn load(path: &Path, env: &EnvArgs) -> anyhow::Result<Self> {
-        let policy = LoadedPolicy::load(path, env)?;
+        let policy = LoadedPolicy::load(path, env, &env.config())?;
         let machine = &policy.machine;
         let info = pb::PolicyInfo {
             algorithm: policy.algorithm.clone(),
@@ -50,29 +51,27 @@ impl PolicyService {
     /// The action, stage name and value for one request.
     pub fn act(&self, request: &pb::ActRequest) -> Result<pb::ActReply, Status> {
         if request.observation.len() != FEATURES.len() {
-            return Err(Status::invalid_argument(format!(
+            return Err(ErrorKind::InvalidField.status(format!(
                 "observation: expected {} values, got {}",
                 FEATURES.len(),
                 request.observation.len()
             )));
         }
         if let Some(k) = request.observation.iter().position(|v| !v.is_finite()) {
-            return Err(Status::invalid_argument(format!(
-                "observation[{k}] ({}) is not finite",
-                FEATURES[k]
-            )));
+            return Err(ErrorKind::InvalidField
+                .status(format!("observation[{k}] ({}) is not finite", FEATURES[k])));
         }
         let mut guard = self
             .policy
             .lock()
-            .map_err(|_| Status::internal("policy lock poisoned"))?;
+            .map_err(|_| ErrorKind::Internal.status("policy lock poisoned"))?;
         let policy = &mut *guard;
         let machine = &policy.machine;
         let stage = if request.stage.is_empty() {
             machine.initial()
         } else {
             machine.stage_id(&request.stage).ok_or_else(|| {
-                Status::invalid_argument(format!(
+                ErrorKind::InvalidField.status(format!(
                     "stage: unknown stage {:?} (one of {})",
                     request.stage,
                     self.info.stages.join(", ")
@@ -80,12 +79,12 @@ impl PolicyService {
             })?
         };
         if machine.is_terminal(stage) {
-            return Err(Status::invalid_argument(format!(
+            return Err(ErrorKind::InvalidField.status(format!(
                 "stage: {} is terminal; the episode is over",
                 machine.stage_name(stage)
             )));
         }
-        let internal = |e: &dyn std::fmt::Display| Status::internal(e.to_string());
+        let internal = |e: &dyn std::fmt::Display| ErrorKind::Internal.status(e.to_string());
         let state = machine
             .abstract_state(stage, &request.observation)
             .map_err(|e| internal(&e))?;
