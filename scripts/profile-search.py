@@ -3,10 +3,11 @@
 
 usage: scripts/profile-search.py WORLD OUT.jsonl --seconds S [--workers N] [--seeds K]
                                  [--held JOINT=LO:HI ...] [--box X0:X1,Y0:Y1,Z0:Z1]
+                                 [--torques T,T,...]
 
 For each sample it writes a copy of WORLD's `hand.json` with the grasp point drawn from
 `--box` (palm frame, m), each `--held` joint drawn from its range, the motors' torque from
-{0.2, 0.35, 0.5, 0.7} N m and every topology's closed commands at 60%, 80% or 100% of each
+`--torques` (default {0.2, 0.35, 0.5, 0.7} N m) and every topology's closed commands at 60%, 80% or 100% of each
 finger's range, runs `crm oracle --world COPY --json --seeds K`, and appends the sample and its
 success to OUT.jsonl (one JSON line each). The best line is a profile to try with more seeds.
 `crm` is the release build (`CARGO_TARGET_DIR`, else `target/`); the description is found as
@@ -48,7 +49,7 @@ def sample(rng, args):
     return {
         "grasp_point": [round(rng.uniform(*axis), 4) for axis in box],
         "held": {j: round(rng.uniform(*span(r, "--held")), 3) for j, r in args.held},
-        "torque": rng.choice([0.2, 0.35, 0.5, 0.7]),
+        "torque": rng.choice(args.torques),
         "close": rng.choice([0.6, 0.8, 1.0]),
     }
 
@@ -101,7 +102,14 @@ def main():
     parser.add_argument("--first", type=int, default=0, help="the first sample's seed")
     parser.add_argument("--box", default="0.0:0.1,-0.03:0.03,-0.1:0.03")
     parser.add_argument("--held", action="append", default=[], metavar="JOINT=LO:HI")
+    parser.add_argument("--torques", default="0.2,0.35,0.5,0.7", help="motor torques to draw (N m)")
     args = parser.parse_args()
+    try:
+        args.torques = [float(t) for t in args.torques.split(",")]
+    except ValueError:
+        raise SystemExit(f"--torques: expected numbers separated by commas, got {args.torques!r}")
+    if not args.torques or any(not t > 0 for t in args.torques):
+        raise SystemExit(f"--torques: each torque must be positive, got {args.torques!r}")
     held = []
     for item in args.held:
         joint, _, rng = item.partition("=")

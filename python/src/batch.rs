@@ -5,7 +5,7 @@
 //! is the episode `crm replay` prints, bit for bit (python/tests).
 
 use crm::{CrmEnv, EnvStep, Environment, Machine, RewardMode, StageId};
-use grasp_sim::{GraspEnv, Protocol, SimConfig, TaskChoice, World};
+use grasp_sim::{EnvSettings, GraspEnv, Protocol, World};
 use rayon::prelude::*;
 
 /// What every environment of a batch is made with (the Python constructor's arguments).
@@ -108,51 +108,20 @@ impl Batch {
             Some(dir) => World::load(dir).map_err(|e| format!("world: {e}"))?,
             None => World::builtin(),
         };
-        let benchmark = world.benchmark.clone();
-        let choice = if options.tasks.is_empty() {
-            TaskChoice::Random
-        } else {
-            let mut indices = Vec::new();
-            for id in &options.tasks {
-                let index = benchmark.task_index(id).ok_or_else(|| {
-                    format!(
-                        "task: unknown task {id:?} (the world {:?} has {})",
-                        world.name,
-                        benchmark
-                            .tasks
-                            .iter()
-                            .map(|t| t.id.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    )
-                })?;
-                indices.push(index);
-            }
-            if let [one] = indices[..] {
-                TaskChoice::Fixed(one)
-            } else {
-                TaskChoice::Subset(indices)
-            }
-        };
-        let mut config = if options.randomize {
-            let mut config = SimConfig::default();
-            if let Some(randomization) = &world.randomization {
-                config.randomization = randomization.clone();
-            }
-            config
-        } else {
-            SimConfig::deterministic()
-        };
-        config.protocol = options.protocol;
-        if let Some(hold) = options.hold_s {
-            config.hold_s = hold as f32;
-        }
+        let choice = world
+            .task_choice(&options.tasks)
+            .map_err(|e| format!("task: {e}"))?;
+        let config = world.sim_config(&EnvSettings {
+            randomization: options.randomize,
+            protocol: options.protocol,
+            hold_s: options.hold_s,
+            ..EnvSettings::default()
+        });
         let machine = world.machine().map_err(|e| format!("world: {e}"))?;
         let slots = (0..count)
             .map(|_| {
-                let mut inner = GraspEnv::new(benchmark.clone(), config.clone());
-                inner
-                    .set_task_choice(choice.clone())
+                let inner = world
+                    .env(config.clone(), choice.clone())
                     .map_err(|e| e.to_string())?;
                 let observed = Observed {
                     inner,

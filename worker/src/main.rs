@@ -1,7 +1,6 @@
 //! `crm`: the command-line front of crm-grasp. Thin glue over the library crates.
 
 mod commands;
-mod jobs;
 mod record;
 mod service;
 

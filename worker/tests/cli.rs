@@ -255,6 +255,100 @@ fn train_writes_a_checkpoint_that_eval_reads_and_refuses_bad_input() {
 }
 
 #[test]
+fn a_job_document_trains_as_the_same_flags_do() {
+    let dir = std::env::temp_dir().join(format!("crm-cli-job-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = |name: &str| dir.join(name).to_str().expect("utf-8 path").to_string();
+    let (code, _, stderr) = crm(&[
+        "train",
+        "--algo",
+        "lppo",
+        "--steps",
+        "128",
+        "--seed",
+        "5",
+        "--task",
+        "mouse-press",
+        "--out",
+        &path("flags"),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    // The document a client would POST, `kind` included.
+    let job = serde_json::json!({
+        "kind": "train", "algorithm": "lppo", "steps": 128, "seed": 5, "task": "mouse-press",
+    });
+    std::fs::write(path("job.json"), job.to_string()).expect("write");
+    let (code, _, stderr) = crm(&["train", "--job", &path("job.json"), "--out", &path("job")]);
+    assert_eq!(code, 0, "{stderr}");
+    let log = |run: &str| -> Vec<serde_json::Value> {
+        std::fs::read_to_string(dir.join(run).join("metrics.jsonl"))
+            .expect("metrics")
+            .lines()
+            .map(|line| {
+                let mut row: serde_json::Value = serde_json::from_str(line).expect("json");
+                let fields = row.as_object_mut().expect("object");
+                fields.remove("wall_s");
+                fields.remove("steps_per_s");
+                row
+            })
+            .collect()
+    };
+    assert_eq!(log("flags"), log("job"));
+    // --steps and --seed override the document.
+    let (code, _, stderr) = crm(&[
+        "train",
+        "--job",
+        &path("job.json"),
+        "--steps",
+        "64",
+        "--out",
+        &path("short"),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(log("short")[0]["steps"], 64);
+    // Refused: a field out of its domain (named by its path), the coordinator's world, a
+    // flag the document sets.
+    for (document, needle) in [
+        (
+            serde_json::json!({"algorithm": "lppo", "steps": 64, "config": {"minibatch_size": 0}}),
+            "config.minibatch_size",
+        ),
+        (
+            serde_json::json!({"algorithm": "lppo", "steps": 64, "world": "allegro"}),
+            "--world DIR",
+        ),
+        (
+            serde_json::json!({"kind": "eval", "algorithm": "lppo", "steps": 64}),
+            "kind",
+        ),
+        (
+            serde_json::json!({"algorithm": "lppo", "steps": 64, "stepz": 1}),
+            "stepz",
+        ),
+    ] {
+        std::fs::write(path("bad.json"), document.to_string()).expect("write");
+        let (code, _, stderr) = crm(&["train", "--job", &path("bad.json"), "--out", &path("bad")]);
+        assert_eq!(code, 2, "{document}");
+        assert!(
+            stderr.contains(needle) && stderr.contains("bad.json"),
+            "{document}: {stderr}"
+        );
+    }
+    let (code, _, stderr) = crm(&[
+        "train",
+        "--job",
+        &path("job.json"),
+        "--algo",
+        "ippo",
+        "--out",
+        &path("bad"),
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("--algo"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn the_topology_network_trains_and_predicts_the_benchmark_topology() {
     let model = std::env::temp_dir().join(format!(
         "crm-cli-topology-{}.safetensors",

@@ -8,8 +8,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::algorithm::Algorithm;
 use crate::config::ConfigError;
-use crate::jobs::Algorithm;
 
 /// Imitation settings of a training job (`"imitation": {"episodes": 2080}` in its JSON).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -5,63 +5,14 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::algorithm::Algorithm;
 use crate::config::{PpoConfig, SacConfig};
 use crate::imitation::ImitationSpec;
 use crate::record::RecordSpec;
 
-/// The learners by name.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Algorithm {
-    /// PPO with intra-stage and transition rewards (the paper's method).
-    CrmPpo,
-    /// PPO with the stage-wise sparse transition rewards only.
-    Ippo,
-    /// PPO with the hierarchical dense intra-stage rewards only.
-    Lppo,
-    /// SAC inside the CRM with the CRM's reward (the paper's CRM-SAC baseline).
-    CrmSac,
-    /// PPO on the flat, unstaged machine (`crates/sim/specs/flat.json`): the ablation.
-    Ppo,
-}
-
-impl Algorithm {
-    pub const ALL: [Algorithm; 5] = [
-        Algorithm::CrmPpo,
-        Algorithm::Ippo,
-        Algorithm::Lppo,
-        Algorithm::CrmSac,
-        Algorithm::Ppo,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Algorithm::CrmPpo => "crm-ppo",
-            Algorithm::Ippo => "ippo",
-            Algorithm::Lppo => "lppo",
-            Algorithm::CrmSac => "crm-sac",
-            Algorithm::Ppo => "ppo",
-        }
-    }
-
-    /// The algorithm named `name`, as in checkpoints and the API.
-    pub fn parse(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|a| a.name() == name)
-    }
-
-    /// Whether this is a PPO learner of the grasping machine (crm-ppo, ippo, lppo): one
-    /// Gaussian policy over the machine's stages, what behaviour cloning
-    /// ([`crate::ImitationSpec::supports`]) and `start_log_std` act on.
-    pub fn is_machine_ppo(self) -> bool {
-        matches!(self, Algorithm::CrmPpo | Algorithm::Ippo | Algorithm::Lppo)
-    }
-}
-
 /// Who executes the task's objective once the grasp is ready (DESIGN.md, "The paper's grasp
 /// protocol").
-#[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ObjectiveMode {
     /// The paper's protocol: the policy approaches and closes the hand; once the grasp is
@@ -73,6 +24,13 @@ pub enum ObjectiveMode {
 }
 
 impl ObjectiveMode {
+    pub const ALL: [ObjectiveMode; 2] = [ObjectiveMode::Scripted, ObjectiveMode::Learned];
+
+    /// The mode named `name`, as in the API.
+    pub fn parse(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             ObjectiveMode::Scripted => "scripted",

@@ -4,6 +4,7 @@
 //! benchmark's data file. Light on purpose (serde, no async runtime): the coordinator, the
 //! workers and the learners all link it. The gRPC protocol is in `crm-proto`.
 
+pub mod algorithm;
 pub mod catalog;
 pub mod checkpoint;
 pub mod config;
@@ -11,12 +12,15 @@ pub mod imitation;
 pub mod jobs;
 pub mod names;
 pub mod record;
+pub mod validate;
 pub mod worlds;
 
+pub use algorithm::Algorithm;
 pub use catalog::Catalog;
 pub use checkpoint::{CheckpointError, CheckpointInfo};
 pub use config::{ConfigError, LrSchedule, PpoConfig, SacConfig};
 pub use imitation::{ImitationSpec, parse_shift};
-pub use jobs::{Algorithm, EvalReport, EvalSpec, Iteration, ObjectiveMode, Row, TrainSpec};
+pub use jobs::{EvalReport, EvalSpec, Iteration, ObjectiveMode, Row, TrainSpec};
 pub use names::check_name;
 pub use record::RecordSpec;
+pub use validate::SpecError;

@@ -35,6 +35,13 @@ pub enum Error {
     /// A task id that is not in the benchmark.
     #[error("unknown task {0:?}")]
     UnknownTask(String),
+    /// A task id a job named that its world lacks, with the world's task ids.
+    #[error("unknown task {id:?} (the world {world:?} has {known})")]
+    NoSuchTask {
+        id: String,
+        world: String,
+        known: String,
+    },
 
     #[error("task weights: {0}")]
     TaskWeights(String),

@@ -36,6 +36,7 @@ pub mod oracle;
 pub mod ready;
 pub mod scene;
 pub mod script;
+pub mod setup;
 pub mod spec;
 mod staging;
 pub mod stiction;
@@ -46,6 +47,7 @@ pub use benchmark::Benchmark;
 pub use config::{FingerActions, Protocol, Randomization, SimConfig};
 pub use env::{GraspEnv, TaskChoice};
 pub use error::{Error, Result};
+pub use setup::EnvSettings;
 pub use world::World;
 
 /// Version of the environment's dynamics and observation layout; checkpoints record it.

@@ -135,10 +135,21 @@ impl World {
         }
     }
 
-    /// The world's CRM: the machine of its spec, or the built-in grasping machine. The
-    /// action of a finger the hand lacks is left out of every stage's action set, so the
-    /// policy's mask hides it; the action space and the spec's file stay the paper's.
+    /// The world's CRM: the machine of its spec, or the built-in grasping machine, as
+    /// [`Self::machine_with`] masks it.
     pub fn machine(&self) -> Result<crm::Machine> {
+        match &self.spec {
+            None if self.benchmark.hand.fingers.iter().all(|f| f.present) => {
+                Ok(crate::spec::grasping_machine())
+            }
+            spec => self.machine_with(spec.clone().unwrap_or_else(crate::spec::grasping_spec)),
+        }
+    }
+
+    /// The machine of `spec` in this world. The action of a finger the hand lacks is left out
+    /// of every stage's action set, so the policy's mask hides it; the action space and the
+    /// spec's file stay the paper's.
+    pub fn machine_with(&self, mut spec: crm::Spec) -> Result<crm::Machine> {
         let missing: Vec<&str> = self
             .benchmark
             .hand
@@ -148,13 +159,6 @@ impl World {
             .filter(|(finger, _)| !finger.present)
             .map(|(_, &name)| name)
             .collect();
-        if missing.is_empty() {
-            return match &self.spec {
-                Some(spec) => Ok(crm::Machine::from_spec(spec.clone())?),
-                None => Ok(crate::spec::grasping_machine()),
-            };
-        }
-        let mut spec = self.spec.clone().unwrap_or_else(crate::spec::grasping_spec);
         for stage in &mut spec.stages {
             stage.actions.retain(|a| !missing.contains(&a.dim.as_str()));
         }

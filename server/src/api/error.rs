@@ -24,6 +24,11 @@ impl ApiError {
         }
     }
 
+    /// A job document's field out of its domain (`TrainSpec::validate`, `EvalSpec::validate`).
+    pub fn spec(err: crm_api::SpecError) -> Self {
+        Self::invalid(err.field, err.message)
+    }
+
     pub fn not_found(field: impl Into<String>, message: impl Into<String>) -> Self {
         Self {
             kind: ErrorKind::NotFound,

@@ -20,11 +20,6 @@ use crate::AppState;
 use crate::errors::ErrorKind;
 use crate::store::{JobFilter, NewJob};
 
-/// Largest training budget a job may ask for.
-const MAX_STEPS: u64 = 10_000_000_000;
-const MAX_EPISODES: u64 = 1_000_000;
-const MAX_ENVS: usize = 1024;
-
 const STATES: [&str; 5] = ["queued", "running", "succeeded", "failed", "cancelled"];
 
 fn decode<T: DeserializeOwned>(value: Value, prefix: &str) -> Result<T, ApiError> {
@@ -82,33 +77,9 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
     match kind.as_str() {
         "train" => {
             let spec: TrainSpec = decode(Value::Object(fields), "")?;
-            spec.sac
-                .validate()
-                .map_err(|e| ApiError::invalid(format!("sac.{}", e.field), e.message))?;
-            if spec.steps == 0 || spec.steps > MAX_STEPS {
-                return Err(ApiError::invalid(
-                    "steps",
-                    format!("must be between 1 and {MAX_STEPS}"),
-                ));
-            }
-            if spec.envs.is_some_and(|n| n == 0 || n > MAX_ENVS) {
-                return Err(ApiError::invalid(
-                    "envs",
-                    format!("must be between 1 and {MAX_ENVS}"),
-                ));
-            }
+            spec.validate().map_err(ApiError::spec)?;
             check_task(&spec.task, &spec.tasks, &spec.topology)?;
-            check_record(&spec.record)?;
             check_imitation(catalog, &spec)?;
-            crm_api::jobs::check_hold_s(spec.hold_s)
-                .map_err(|message| ApiError::invalid("hold_s", message))?;
-            crm_api::jobs::check_settle_s(spec.settle_s)
-                .map_err(|message| ApiError::invalid("settle_s", message))?;
-            crm_api::jobs::check_start_log_std(spec.algorithm, spec.start_log_std)
-                .map_err(|message| ApiError::invalid("start_log_std", message))?;
-            spec.config
-                .validate()
-                .map_err(|e| ApiError::invalid(format!("config.{}", e.field), e.message))?;
             check_fine_tune(state, &spec).await?;
             Ok(Submission {
                 kind: "train",
@@ -212,35 +183,16 @@ pub(super) fn check_task(
 /// checked against the catalog.
 pub(super) fn eval_spec(catalog: &crm_api::Catalog, fields: Value) -> Result<EvalSpec, ApiError> {
     let spec: EvalSpec = decode(fields, "")?;
-    if spec.episodes == 0 || spec.episodes > MAX_EPISODES {
-        return Err(ApiError::invalid(
-            "episodes",
-            format!("must be between 1 and {MAX_EPISODES}"),
-        ));
-    }
+    spec.validate().map_err(ApiError::spec)?;
     check_task(catalog, &spec.task, &spec.tasks, &spec.topology)?;
-    check_record(&spec.record)?;
-    crm_api::jobs::check_hold_s(spec.hold_s)
-        .map_err(|message| ApiError::invalid("hold_s", message))?;
     Ok(spec)
 }
 
+/// The world's tasks an imitation names (the rest of it is `TrainSpec::validate`'s).
 fn check_imitation(catalog: &crm_api::Catalog, spec: &TrainSpec) -> Result<(), ApiError> {
     let Some(imitation) = &spec.imitation else {
         return Ok(());
     };
-    if !crm_api::ImitationSpec::supports(spec.algorithm) {
-        return Err(ApiError::invalid(
-            "imitation",
-            format!(
-                "behaviour cloning is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo), not {}",
-                spec.algorithm.name()
-            ),
-        ));
-    }
-    imitation
-        .validate()
-        .map_err(|e| ApiError::invalid(format!("imitation.{}", e.field), e.message))?;
     for (k, id) in imitation.tasks.iter().enumerate() {
         known_task(catalog, format!("imitation.tasks[{k}]"), id)?;
     }
@@ -289,15 +241,6 @@ async fn check_fine_tune(state: &AppState, spec: &TrainSpec) -> Result<(), ApiEr
         ));
     }
     Ok(())
-}
-
-fn check_record(record: &Option<crm_api::RecordSpec>) -> Result<(), ApiError> {
-    match record {
-        Some(record) => record
-            .validate()
-            .map_err(|e| ApiError::invalid(format!("record.{}", e.field), e.message)),
-        None => Ok(()),
-    }
 }
 
 /// The header that makes a submit safe to retry.

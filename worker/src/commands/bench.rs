@@ -183,8 +183,8 @@ fn rss_bytes() -> Option<f64> {
 }
 
 fn env(args: EnvBenchArgs) -> anyhow::Result<()> {
-    let benchmark = args.env.benchmark()?;
-    let config: SimConfig = args.env.config();
+    let benchmark = args.env.env().benchmark()?;
+    let config: SimConfig = args.env.env().config()?;
 
     let mut one = GraspEnv::new(benchmark.clone(), config.clone());
     drive(&mut one, 200, 99)?; // warm up caches and allocations
@@ -239,8 +239,8 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
     if args.split_products {
         crm_learn::kernels::split_products();
     }
-    let benchmark = args.env.benchmark()?;
-    let machine = args.env.machine()?;
+    let benchmark = args.env.env().benchmark()?;
+    let machine = args.env.env().machine()?;
     let mut config: crm_learn::PpoConfig = super::read_json(&args.config)?;
     config.target_kl = 0.0;
     if let Some(steps) = args.steps {
@@ -251,7 +251,7 @@ fn learn(args: LearnBenchArgs) -> anyhow::Result<()> {
         .map_err(|message| anyhow::anyhow!("--settle-s {message}"))?;
     let sim = SimConfig {
         settle_s: args.settle_s.unwrap_or(0.0) as f32,
-        ..args.env.config()
+        ..args.env.env().config()?
     };
     let env_count = args.envs.unwrap_or_else(rayon::current_num_threads).max(1);
     let envs = (0..env_count)

@@ -9,7 +9,7 @@ use crm_api::EvalSpec;
 use serde::Serialize;
 
 use super::{EnvArgs, emit};
-use crate::jobs::eval::{EpisodeRecord, evaluate_in};
+use crm_run::eval::{EpisodeRecord, evaluate_in};
 
 #[derive(clap::Args, Debug)]
 pub struct HoldBenchArgs {
@@ -94,7 +94,7 @@ fn compare(
         deterministic: false,
         hold_s: env.hold_s,
     };
-    let full = env.config_for(spec.objective, spec.hold_s);
+    let full = env.env().config_for(spec.objective, spec.hold_s)?;
     let shortcut = grasp_sim::SimConfig {
         settle_s: settle_s as f32,
         ..full.clone()
@@ -103,10 +103,17 @@ fn compare(
     for config in [full, shortcut] {
         let started = Instant::now();
         let mut episodes = Vec::new();
-        evaluate_in(checkpoint, &spec, env, config, None, |_, _, record| {
-            episodes.push(record.clone());
-            true
-        })?;
+        evaluate_in(
+            checkpoint,
+            &spec,
+            env.env(),
+            config,
+            None,
+            |_, _, record| {
+                episodes.push(record.clone());
+                true
+            },
+        )?;
         runs.push((episodes, started.elapsed().as_secs_f64()));
     }
     let [(full, full_wall), (short, short_wall)] =

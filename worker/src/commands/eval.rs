@@ -9,8 +9,8 @@ use serde_json::Value;
 
 use super::remote::Rest;
 use super::{EnvArgs, FingerMode, emit};
-use crate::jobs::eval::evaluate;
 use crm_api::{EvalReport, EvalSpec};
+use crm_run::eval::evaluate;
 
 #[derive(clap::Args, Debug)]
 pub struct EvalArgs {
@@ -54,7 +54,7 @@ pub struct EvalArgs {
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     // The world by name, for a coordinator's workers (`--coordinator`).
     let world = match &args.env.world {
-        Some(_) => Some(args.env.world()?.name.clone()),
+        Some(_) => Some(args.env.env().world()?.name.clone()),
         None => None,
     };
     let spec = EvalSpec {
@@ -72,7 +72,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let (report, mut value) = match &args.coordinator {
         Some(url) => remote(url, &args, &spec)?,
         None => {
-            let report = evaluate(&args.checkpoint, &spec, &args.env, None, |_, _, _| true)?;
+            let report = evaluate(&args.checkpoint, &spec, args.env.env(), None, |_, _, _| {
+                true
+            })?;
             let value = serde_json::to_value(&report)?;
             (report, value)
         }

@@ -17,15 +17,17 @@ pub mod train;
 pub mod world;
 
 use std::path::PathBuf;
-use std::sync::{Arc, OnceLock};
+use std::sync::OnceLock;
 
 use std::io::Write;
 
 use anyhow::Context;
 use crm_api::ObjectiveMode;
-use grasp_sim::{Benchmark, SimConfig, World};
+use crm_run::{Env, EnvSpec};
+use grasp_sim::{Benchmark, EnvSettings};
 
-/// Options every environment-running command shares.
+/// Options every environment-running command shares: a [`crm_run::EnvSpec`] on the command
+/// line.
 #[derive(clap::Args, Clone, Debug, Default)]
 pub struct EnvArgs {
     /// A world folder (`world.json`: hand, objects, tasks, spec, sensors) to run instead of
@@ -43,7 +45,7 @@ pub struct EnvArgs {
     pub no_randomization: bool,
     /// Who executes the objective once the grasp is ready (a job's `objective`):
     /// `scripted`, the paper's protocol (the arm, by script), or `learned` (the policy).
-    #[arg(long, value_enum, default_value_t = ObjectiveMode::Scripted)]
+    #[arg(long, value_parser = objective_mode(), default_value = "scripted")]
     pub protocol: ObjectiveMode,
     /// How finger actions act: `closing` only (the authors' code, the default), or `signed`
     /// increments that also open the hand.
@@ -55,9 +57,9 @@ pub struct EnvArgs {
     /// paper's test.
     #[arg(long, value_name = "SECONDS", value_parser = parse_hold_s)]
     pub hold_s: Option<f64>,
-    /// The world, read once.
+    /// The runtime's environments of these options, made once.
     #[arg(skip)]
-    loaded: Arc<OnceLock<World>>,
+    built: OnceLock<Env>,
 }
 
 /// `--hold-s`: seconds within [`crm_api::jobs::HOLD_S_RANGE`].
@@ -69,6 +71,20 @@ fn parse_hold_s(text: &str) -> Result<f64, String> {
     Ok(hold)
 }
 
+/// `--algo`: a learner by its name in the API (`crm_api::Algorithm`).
+pub fn algorithm() -> impl clap::builder::TypedValueParser<Value = crm_api::Algorithm> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(crm_api::Algorithm::ALL.map(crm_api::Algorithm::name))
+        .try_map(|name| crm_api::Algorithm::parse(&name).ok_or("not a learner"))
+}
+
+/// `--protocol`: an objective mode by its name in the API.
+fn objective_mode() -> impl clap::builder::TypedValueParser<Value = ObjectiveMode> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(ObjectiveMode::ALL.map(ObjectiveMode::name))
+        .try_map(|name| ObjectiveMode::parse(&name).ok_or("not an objective mode"))
+}
+
 /// `--finger-actions`: see [`grasp_sim::FingerActions`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum FingerMode {
@@ -77,96 +93,29 @@ pub enum FingerMode {
     Signed,
 }
 
-/// The world's protocol for a job's objective mode.
-pub fn protocol(mode: ObjectiveMode) -> grasp_sim::Protocol {
-    match mode {
-        ObjectiveMode::Scripted => grasp_sim::Protocol::Scripted,
-        ObjectiveMode::Learned => grasp_sim::Protocol::Learned,
-    }
-}
-
 impl EnvArgs {
-    /// The same options running the world in `dir` (a job's `world`).
-    pub fn in_world(&self, dir: Option<PathBuf>) -> Self {
-        Self {
-            world: dir,
-            loaded: Arc::default(),
-            ..self.clone()
+    /// The options as the runtime takes them.
+    pub fn spec(&self) -> EnvSpec {
+        EnvSpec {
+            world: self.world.clone(),
+            benchmark: self.benchmark.clone(),
+            spec: self.spec.clone(),
+            settings: EnvSettings {
+                randomization: !self.no_randomization,
+                protocol: crm_run::env::protocol(self.protocol),
+                finger_actions: match self.finger_actions {
+                    FingerMode::Signed => grasp_sim::FingerActions::Signed,
+                    FingerMode::Closing => grasp_sim::FingerActions::Closing,
+                },
+                hold_s: self.hold_s,
+                settle_s: None,
+            },
         }
     }
 
-    /// The world of `--world`, or the built-in one (with `--benchmark`'s objects and tasks).
-    pub fn world(&self) -> anyhow::Result<&World> {
-        if let Some(world) = self.loaded.get() {
-            return Ok(world);
-        }
-        let world = match (&self.world, &self.benchmark) {
-            (Some(dir), _) => {
-                World::load(dir).with_context(|| format!("loading the world {}", dir.display()))?
-            }
-            (None, Some(path)) => {
-                let mut world = World::builtin();
-                world.benchmark = Arc::new(Benchmark::load(path).context("loading the benchmark")?);
-                world
-            }
-            (None, None) => World::builtin(),
-        };
-        Ok(self.loaded.get_or_init(|| world))
-    }
-
-    pub fn benchmark(&self) -> anyhow::Result<Arc<Benchmark>> {
-        Ok(self.world()?.benchmark.clone())
-    }
-
-    /// The machine from `--spec`, the world's spec, or the built-in grasping machine.
-    pub fn machine(&self) -> anyhow::Result<crm::Machine> {
-        let spec = self.world()?.spec.clone();
-        self.machine_or(spec.unwrap_or_else(grasp_sim::spec::grasping_spec))
-    }
-
-    /// The machine from `--spec`, or `default`.
-    pub fn machine_or(&self, default: crm::Spec) -> anyhow::Result<crm::Machine> {
-        let spec = match &self.spec {
-            Some(path) => crm::Spec::load(path).context("loading the crm spec")?,
-            None => default,
-        };
-        grasp_sim::spec::check_compatible(&spec)?;
-        Ok(crm::Machine::from_spec(spec)?)
-    }
-
-    /// The world's settings; a job's `objective` and `hold_s` decide the protocol and the
-    /// hold (see [`Self::config_for`]).
-    pub fn config(&self) -> SimConfig {
-        self.config_for(self.protocol, self.hold_s)
-    }
-
-    /// The world's settings with the protocol of `objective` and, when given, `hold_s`
-    /// seconds of steady hold (a job's; the CLI commands copy `--hold-s` into their spec),
-    /// else the paper's 5 s.
-    pub fn config_for(&self, objective: ObjectiveMode, hold_s: Option<f64>) -> SimConfig {
-        let mut config = if self.no_randomization {
-            SimConfig::deterministic()
-        } else {
-            let mut config = SimConfig::default();
-            // An unreadable world is reported by `benchmark()`, which every command calls.
-            if let Ok(World {
-                randomization: Some(randomization),
-                ..
-            }) = self.world()
-            {
-                config.randomization = randomization.clone();
-            }
-            config
-        };
-        config.protocol = protocol(objective);
-        if let Some(hold) = hold_s {
-            config.hold_s = hold as f32;
-        }
-        config.finger_actions = match self.finger_actions {
-            FingerMode::Signed => grasp_sim::FingerActions::Signed,
-            FingerMode::Closing => grasp_sim::FingerActions::Closing,
-        };
-        config
+    /// The runtime's environments of these options (the world loaded once).
+    pub fn env(&self) -> &Env {
+        self.built.get_or_init(|| Env::new(self.spec()))
     }
 }
 
@@ -186,9 +135,7 @@ pub fn read_json<T: serde::de::DeserializeOwned + Default>(
 
 /// The index of a task by id, or a message naming the flag and pointing at `crm tasks`.
 pub fn task_index(benchmark: &Benchmark, id: &str) -> anyhow::Result<usize> {
-    benchmark
-        .task_index(id)
-        .with_context(|| format!("--task: unknown task {id:?} (see `crm tasks`)"))
+    Ok(crm_run::choice::task_index(benchmark, id)?)
 }
 
 /// Writes to standard output; a closed pipe (`crm tasks | head`) ends the output quietly.

@@ -82,9 +82,9 @@ fn group(episodes: &[&OracleEpisode]) -> Group {
 }
 
 pub fn run(args: OracleArgs) -> anyhow::Result<()> {
-    let benchmark = args.env.benchmark()?;
-    let machine = args.env.machine()?;
-    let config = args.env.config();
+    let benchmark = args.env.env().benchmark()?;
+    let machine = args.env.env().machine()?;
+    let config = args.env.env().config()?;
     let selected: Vec<usize> = if args.tasks.is_empty() {
         (0..benchmark.tasks.len()).collect()
     } else {
@@ -93,9 +93,8 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
             .map(|id| super::task_index(&benchmark, id))
             .collect::<anyhow::Result<_>>()?
     };
-    let shifts =
-        crate::jobs::demos::shifts_by_task(&benchmark, &args.shifts.iter().cloned().collect())
-            .map_err(|e| anyhow::anyhow!("--shift: {e:#}"))?;
+    let shifts = crm_run::demos::shifts_by_task(&benchmark, &args.shifts.iter().cloned().collect())
+        .map_err(|e| anyhow::anyhow!("--shift: {e:#}"))?;
     if args.trace {
         for &task in &selected {
             trace(

@@ -7,8 +7,8 @@ use anyhow::{Context, bail};
 use crm_api::{EvalSpec, RecordSpec};
 
 use super::{EnvArgs, emit};
-use crate::jobs::eval::evaluate;
 use crate::record::{Recorder, Target, inspect, lock, reachable};
+use crm_run::eval::evaluate;
 
 #[derive(clap::Args, Debug)]
 pub struct RecordArgs {
@@ -82,8 +82,8 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     evaluate(
         &checkpoint,
         &spec,
-        &args.env,
-        Some(recorder.clone()),
+        args.env.env(),
+        Some(recorder.clone() as crm_run::SharedRecorder),
         |_, _, e| {
             episode = Some(e.clone());
             true

@@ -64,10 +64,10 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             ACTIONS.len()
         );
     }
-    let benchmark = args.env.benchmark()?;
+    let benchmark = args.env.env().benchmark()?;
     let task = super::task_index(&benchmark, &args.task)?;
-    let machine = args.env.machine()?;
-    let mut grasp = GraspEnv::new(benchmark, args.env.config());
+    let machine = args.env.env().machine()?;
+    let mut grasp = GraspEnv::new(benchmark, args.env.env().config()?);
     grasp.set_task_choice(grasp_sim::TaskChoice::Fixed(task))?;
     let mode = match args.reward_mode {
         RewardModeArg::Crm => crm::RewardMode::Crm,

@@ -139,7 +139,10 @@ pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
 }
 
 pub fn serve_policy(args: ServePolicyArgs) -> anyhow::Result<()> {
-    let env = crate::commands::EnvArgs::default().in_world(args.world);
+    let env = match args.world {
+        Some(dir) => crm_run::Env::in_world(dir),
+        None => crm_run::Env::default(),
+    };
     let access = policy::Access::new(args.token, args.tls_cert.zip(args.tls_key))?;
     policy::serve_main(&args.checkpoint, &args.listen, &env, access)
 }

@@ -22,7 +22,7 @@ pub struct SpecArgs {
 }
 
 pub fn run(args: TasksArgs) -> anyhow::Result<()> {
-    let benchmark = args.env.benchmark()?;
+    let benchmark = args.env.env().benchmark()?;
     if args.json {
         let objects: Vec<_> = benchmark
             .objects
@@ -107,7 +107,7 @@ pub fn run(args: TasksArgs) -> anyhow::Result<()> {
 }
 
 pub fn run_spec(args: SpecArgs) -> anyhow::Result<()> {
-    let machine = args.env.machine()?;
+    let machine = args.env.env().machine()?;
     emit(&format!(
         "{}\n",
         serde_json::to_string_pretty(machine.spec())?

@@ -9,21 +9,32 @@ use anyhow::{Context, bail};
 use crm_learn::PpoConfig;
 
 use super::{EnvArgs, read_json};
-use crate::jobs::demos;
-use crate::jobs::train::Trainer;
 use crm_api::{Algorithm, ImitationSpec, SacConfig, TrainSpec};
+use crm_run::Trainer;
+use crm_run::demos;
 
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
     #[command(flatten)]
     pub env: EnvArgs,
-    #[arg(long, value_enum, default_value = "crm-ppo")]
+    /// A training job's document as `POST /api/v1/jobs` takes it (`kind` may be left out),
+    /// instead of the flags that set its fields; --steps, --seed and --envs override it. Its
+    /// `world`, `fine_tune` and `record` name a coordinator's things: give --world DIR and
+    /// --fine-tune FILE here.
+    #[arg(long, value_name = "FILE", conflicts_with_all = [
+        "algo", "config", "task", "topology", "start_log_std", "bc_episodes", "bc_epochs",
+        "bc_noise", "bc_learning_rate", "bc_tasks", "bc_shifts", "bc_stages",
+        "bc_anchor_episodes", "curriculum", "settle_s", "protocol", "hold_s",
+    ])]
+    pub job: Option<PathBuf>,
+    #[arg(long, value_parser = super::algorithm(), default_value = "crm-ppo")]
     pub algo: Algorithm,
     /// Environment steps to train for (in total, counting a resumed checkpoint's).
+    #[arg(long, required_unless_present = "job")]
+    pub steps: Option<i64>,
+    /// The run's seed (default 0, or the --job document's).
     #[arg(long)]
-    pub steps: i64,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    pub seed: Option<u64>,
     /// Directory for the checkpoint and metrics (created if missing).
     #[arg(long)]
     pub out: PathBuf,
@@ -108,9 +119,123 @@ fn parse_settle_s(text: &str) -> Result<f64, String> {
 }
 
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
-    if args.steps <= 0 {
-        bail!("--steps must be positive, got {}", args.steps);
+    if let Some(steps) = args.steps
+        && steps <= 0
+    {
+        bail!("--steps must be positive, got {steps}");
     }
+    let spec = match &args.job {
+        Some(path) => job_spec(&args, path)?,
+        None => flag_spec(&args)?,
+    };
+    let init = match (&args.resume, &args.fine_tune) {
+        (Some(path), _) => Some(crm_run::Init::Resume(path)),
+        (None, Some(path)) => Some(crm_run::Init::FineTune(path)),
+        (None, None) => None,
+    };
+    let mut trainer = Trainer::new(spec.clone(), args.env.env(), init, None)?;
+    trainer.set_command(std::env::args().collect());
+    let bar = indicatif::ProgressBar::new(0);
+    demos::imitate(
+        &spec,
+        args.env.env(),
+        &mut trainer,
+        |line| {
+            eprintln!("{line}");
+            true
+        },
+        |name, done, total| {
+            bar.set_length(total);
+            bar.set_position(done);
+            bar.set_message(name.to_string());
+            true
+        },
+    )?;
+    bar.finish_and_clear();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let metrics_path = args.out.join("metrics.jsonl");
+    let mut metrics = std::fs::OpenOptions::new()
+        .create(true)
+        .append(args.resume.is_some())
+        .write(true)
+        .truncate(args.resume.is_none())
+        .open(&metrics_path)
+        .with_context(|| format!("creating {}", metrics_path.display()))?;
+    let checkpoint = args
+        .out
+        .join(format!("{}.safetensors", spec.algorithm.name()));
+    let total = spec.steps;
+    let bar = indicatif::ProgressBar::new(total);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} steps {per_sec} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_position(trainer.steps().min(total));
+    while !trainer.finished() {
+        let it = trainer.iterate()?;
+        writeln!(metrics, "{}", serde_json::to_string(&it)?)?;
+        let mix: Vec<String> = it
+            .stage_mix
+            .iter()
+            .map(|(name, share)| format!("{name} {:.0}%", 100.0 * share))
+            .collect();
+        let message = format!(
+            "success(last 100) {:.2}  return {}  length {}  [{}]{}",
+            it.success_rate_last_100,
+            it.mean_return.map_or("-".into(), |v| format!("{v:.1}")),
+            it.mean_episode_length
+                .map_or("-".into(), |v| format!("{v:.1}")),
+            mix.join(", "),
+            weakest(&it.task_success, 3)
+        );
+        if bar.is_hidden() {
+            // Not a terminal (a log file, CI): one line per iteration instead of a bar.
+            eprintln!(
+                "{}/{total} steps  {:.0} steps/s  {message}",
+                it.steps, it.steps_per_s
+            );
+        }
+        bar.set_position(it.steps.min(total));
+        bar.set_message(message);
+        if args.checkpoint_every > 0 && it.iteration % args.checkpoint_every == 0 {
+            trainer.save(&checkpoint)?;
+            if args.keep_checkpoints {
+                let kept = args.out.join(format!(
+                    "{}-{}.safetensors",
+                    spec.algorithm.name(),
+                    it.steps
+                ));
+                std::fs::copy(&checkpoint, &kept)
+                    .with_context(|| format!("keeping {}", kept.display()))?;
+            }
+        }
+    }
+    if trainer.stopped_early() {
+        let line = format!(
+            "early stop at {} steps: the last {} episodes reached the success threshold",
+            trainer.steps(),
+            trainer.early_stop_window()
+        );
+        // A hidden bar (a log file) prints nothing of its own.
+        if bar.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            bar.println(line);
+        }
+    }
+    bar.finish();
+    trainer.save(&checkpoint)?;
+    eprintln!(
+        "wrote {} and {}",
+        checkpoint.display(),
+        metrics_path.display()
+    );
+    Ok(())
+}
+
+/// The training spec the flags make.
+fn flag_spec(args: &TrainArgs) -> anyhow::Result<TrainSpec> {
     let imitation = (args.bc_episodes > 0).then_some(ImitationSpec {
         episodes: args.bc_episodes,
         epochs: args.bc_epochs,
@@ -154,11 +279,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     } else {
         (read_json::<PpoConfig>(&args.config)?, SacConfig::default())
     };
-    let spec = TrainSpec {
+    Ok(TrainSpec {
         algorithm: args.algo,
         world: None,
-        steps: args.steps as u64,
-        seed: args.seed,
+        steps: args.steps.unwrap_or_default() as u64,
+        seed: args.seed.unwrap_or_default(),
         task: None,
         tasks: args.task.clone(),
         topology: args.topology.clone(),
@@ -174,107 +299,55 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         curriculum: args.curriculum,
         hold_s: args.env.hold_s,
         settle_s: args.settle_s,
-    };
-    let init = match (&args.resume, &args.fine_tune) {
-        (Some(path), _) => Some(crate::jobs::Init::Resume(path)),
-        (None, Some(path)) => Some(crate::jobs::Init::FineTune(path)),
-        (None, None) => None,
-    };
-    let mut trainer = Trainer::new(spec.clone(), &args.env, init, None)?;
-    trainer.set_command(std::env::args().collect());
-    let bar = indicatif::ProgressBar::new(0);
-    demos::imitate(
-        &spec,
-        &args.env,
-        &mut trainer,
-        |line| {
-            eprintln!("{line}");
-            true
-        },
-        |name, done, total| {
-            bar.set_length(total);
-            bar.set_position(done);
-            bar.set_message(name.to_string());
-            true
-        },
-    )?;
-    bar.finish_and_clear();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let metrics_path = args.out.join("metrics.jsonl");
-    let mut metrics = std::fs::OpenOptions::new()
-        .create(true)
-        .append(args.resume.is_some())
-        .write(true)
-        .truncate(args.resume.is_none())
-        .open(&metrics_path)
-        .with_context(|| format!("creating {}", metrics_path.display()))?;
-    let checkpoint = args.out.join(format!("{}.safetensors", args.algo.name()));
-    let total = args.steps as u64;
-    let bar = indicatif::ProgressBar::new(total);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} steps {per_sec} {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    bar.set_position(trainer.steps().min(total));
-    while !trainer.finished() {
-        let it = trainer.iterate()?;
-        writeln!(metrics, "{}", serde_json::to_string(&it)?)?;
-        let mix: Vec<String> = it
-            .stage_mix
-            .iter()
-            .map(|(name, share)| format!("{name} {:.0}%", 100.0 * share))
-            .collect();
-        let message = format!(
-            "success(last 100) {:.2}  return {}  length {}  [{}]{}",
-            it.success_rate_last_100,
-            it.mean_return.map_or("-".into(), |v| format!("{v:.1}")),
-            it.mean_episode_length
-                .map_or("-".into(), |v| format!("{v:.1}")),
-            mix.join(", "),
-            weakest(&it.task_success, 3)
-        );
-        if bar.is_hidden() {
-            // Not a terminal (a log file, CI): one line per iteration instead of a bar.
-            eprintln!(
-                "{}/{total} steps  {:.0} steps/s  {message}",
-                it.steps, it.steps_per_s
+    })
+}
+
+/// The training spec of a `--job` document, with --steps, --seed and --envs over it.
+fn job_spec(args: &TrainArgs, path: &std::path::Path) -> anyhow::Result<TrainSpec> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut document: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    if let Some(fields) = document.as_object_mut() {
+        match fields.remove("kind") {
+            None => {}
+            Some(serde_json::Value::String(kind)) if kind == "train" => {}
+            Some(other) => bail!(
+                "{}: kind: a training job's is \"train\", not {other}",
+                path.display()
+            ),
+        }
+    }
+    let mut spec: TrainSpec = serde_json::from_value(document)
+        .with_context(|| format!("parsing {} as a training job", path.display()))?;
+    for (field, set, instead) in [
+        ("world", spec.world.is_some(), "give --world DIR"),
+        (
+            "fine_tune",
+            spec.fine_tune.is_some(),
+            "give --fine-tune FILE",
+        ),
+        ("record", spec.record.is_some(), "record with `crm record`"),
+    ] {
+        if set {
+            bail!(
+                "{}: {field} names the coordinator's things, which `crm train` does not have: {instead}",
+                path.display()
             );
         }
-        bar.set_position(it.steps.min(total));
-        bar.set_message(message);
-        if args.checkpoint_every > 0 && it.iteration % args.checkpoint_every == 0 {
-            trainer.save(&checkpoint)?;
-            if args.keep_checkpoints {
-                let kept = args
-                    .out
-                    .join(format!("{}-{}.safetensors", args.algo.name(), it.steps));
-                std::fs::copy(&checkpoint, &kept)
-                    .with_context(|| format!("keeping {}", kept.display()))?;
-            }
-        }
     }
-    if trainer.stopped_early() {
-        let line = format!(
-            "early stop at {} steps: the last {} episodes reached the success threshold",
-            trainer.steps(),
-            trainer.early_stop_window()
-        );
-        // A hidden bar (a log file) prints nothing of its own.
-        if bar.is_hidden() {
-            eprintln!("{line}");
-        } else {
-            bar.println(line);
-        }
+    if let Some(steps) = args.steps {
+        spec.steps = steps as u64;
     }
-    bar.finish();
-    trainer.save(&checkpoint)?;
-    eprintln!(
-        "wrote {} and {}",
-        checkpoint.display(),
-        metrics_path.display()
-    );
-    Ok(())
+    if let Some(seed) = args.seed {
+        spec.seed = seed;
+    }
+    if args.envs.is_some() {
+        spec.envs = args.envs;
+    }
+    spec.validate()
+        .map_err(|err| anyhow::anyhow!("{}: {err}", path.display()))?;
+    Ok(spec)
 }
 
 /// The `count` tasks with the lowest training success (`  weakest: bowl-lift 0.12, ...`), or

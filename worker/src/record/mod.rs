@@ -1,16 +1,16 @@
 //! Rerun recordings (issue: stream stage transitions and trajectories to the viewer). A
-//! [`Recorder`] is shared by the environment that records (`env.rs`, a wrapper around
-//! `GraspEnv` that logs every control step of a recorded episode: `scene.rs`) and by the job
-//! that ships the bytes: every Nth episode becomes its own rerun recording (so the viewer lists
+//! [`Recorder`] is shared by the environment that records (`crm_run::record::Recorded`, which
+//! calls it through the runtime's `Recorder` and `EpisodeLog` traits; each control step of a
+//! recorded episode is logged by `scene.rs`) and by the job that ships the bytes: every Nth episode becomes its own rerun recording (so the viewer lists
 //! episodes side by side), written to memory and handed out as whole `.rrd` streams, which
 //! concatenate into one file; or each recording streams live to a viewer. Training series
 //! (success, returns, stage mix per iteration) go to one more recording. `inspect.rs` reads a
 //! file back.
 
-pub mod env;
 pub mod inspect;
 mod scene;
 
+use std::any::Any;
 use std::net::{TcpStream, ToSocketAddrs};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
@@ -20,9 +20,8 @@ use crm_api::{Iteration, RecordSpec};
 use rerun::sink::MemorySinkStorage;
 use rerun::{RecordingStream, RecordingStreamBuilder};
 
-use crate::jobs::eval::EpisodeRecord;
-
-pub use env::Recorded;
+use crm_run::eval::EpisodeRecord;
+use crm_run::record::{EpisodeLog, Move};
 
 /// The application id every recording carries.
 pub const APP_ID: &str = "crm-grasp";
@@ -61,8 +60,16 @@ pub struct Recorder {
     summaries: Option<Vec<EpisodeRecord>>,
 }
 
-/// A recorder shared between an environment and its job.
+/// A recorder shared between an environment and its job (the runtime takes it as a
+/// `crm_run::record::SharedRecorder`).
 pub type SharedRecorder = Arc<Mutex<Recorder>>;
+
+/// The recorder as the runtime takes it.
+pub fn for_runtime(recorder: &Option<SharedRecorder>) -> Option<crm_run::SharedRecorder> {
+    recorder
+        .clone()
+        .map(|recorder| recorder as crm_run::SharedRecorder)
+}
 
 /// Locks a shared recorder; a poisoned lock still holds usable counters.
 pub fn lock(recorder: &SharedRecorder) -> MutexGuard<'_, Recorder> {
@@ -235,6 +242,72 @@ impl Recorder {
         }
         let episodes = std::mem::take(&mut self.pending_episodes);
         Some((std::mem::take(&mut self.pending), episodes))
+    }
+}
+
+impl crm_run::record::Recorder for Recorder {
+    fn begin_episode(&mut self, what: &str) -> Option<Box<dyn EpisodeLog>> {
+        Recorder::begin_episode(self, what).map(|stream| Box::new(stream) as Box<dyn EpisodeLog>)
+    }
+
+    fn end_episode(&mut self, log: Box<dyn EpisodeLog>, summary: Option<EpisodeRecord>) {
+        match (log as Box<dyn Any>).downcast::<EpisodeStream>() {
+            Ok(stream) => Recorder::end_episode(self, *stream, summary),
+            Err(_) => tracing::warn!("an episode log this recorder did not open"),
+        }
+    }
+
+    fn log_iteration(&mut self, iteration: &Iteration) {
+        Recorder::log_iteration(self, iteration);
+    }
+}
+
+impl EpisodeLog for EpisodeStream {
+    fn start(&mut self, env: &grasp_sim::GraspEnv, stage: &str, stage_id: crm::StageId) {
+        let rec = &self.rec;
+        rec.set_time_sequence("step", 0);
+        let parts = env.parts();
+        let logged = scene::log_shapes(rec, &parts)
+            .and_then(|()| scene::log_poses(rec, &parts))
+            .and_then(|()| scene::log_contacts(rec, &[], env.grasp_location().map(Into::into)))
+            .and_then(|()| scene::log_stage(rec, stage, stage_id, true));
+        if let Err(err) = logged {
+            tracing::warn!(%err, "recording an episode's start");
+        }
+    }
+
+    fn step(&mut self, step: i64, env: &grasp_sim::GraspEnv, moved: Option<Move<'_>>) {
+        let rec = &self.rec;
+        rec.set_time_sequence("step", step);
+        let parts = env.parts();
+        let mut logged = scene::log_poses(rec, &parts).and_then(|()| {
+            scene::log_contacts(
+                rec,
+                &env.contacts_view(),
+                env.grasp_location().map(Into::into),
+            )
+        });
+        if let Some(moved) = moved {
+            logged = logged
+                .and_then(|()| scene::log_rewards(rec, moved.intra_reward, moved.transition_reward))
+                .and_then(|()| {
+                    scene::log_stage(rec, moved.to, moved.to_id, moved.to != moved.from)
+                });
+            if let Some(event) = moved.event {
+                logged = logged.and_then(|()| {
+                    scene::log_transition(rec, moved.from, moved.to, event, moved.transition_reward)
+                });
+            }
+        }
+        if let Err(err) = logged {
+            tracing::warn!(%err, "recording a step");
+        }
+    }
+
+    fn end(&mut self, stage: &str, steps: i64, truncated: bool) {
+        if let Err(err) = scene::log_end(&self.rec, stage, steps, truncated) {
+            tracing::warn!(%err, "recording an episode's end");
+        }
     }
 }
 

@@ -12,8 +12,8 @@ use crm_server::errors::ErrorKind;
 use grasp_sim::observation::{ACTIONS, FEATURES};
 use tonic::{Request, Response, Status};
 
-use crate::commands::EnvArgs;
-use crate::jobs::eval::LoadedPolicy;
+use crm_run::Env;
+use crm_run::eval::LoadedPolicy;
 
 pub struct PolicyService {
     policy: Mutex<LoadedPolicy>,
@@ -23,8 +23,8 @@ pub struct PolicyService {
 impl PolicyService {
     /// Loads `path` for the world of `env` (its hand, spec and sensors must be the ones the
     /// checkpoint was trained with).
-    pub fn load(path: &Path, env: &EnvArgs) -> anyhow::Result<Self> {
-        let policy = LoadedPolicy::load(path, env, &env.config())?;
+    pub fn load(path: &Path, env: &Env) -> anyhow::Result<Self> {
+        let policy = LoadedPolicy::load(path, env, &env.config()?)?;
         let machine = &policy.machine;
         let info = pb::PolicyInfo {
             algorithm: policy.algorithm.clone(),
@@ -148,7 +148,7 @@ impl Access {
 pub fn serve_main(
     checkpoint: &Path,
     listen: &str,
-    env: &EnvArgs,
+    env: &Env,
     access: Access,
 ) -> anyhow::Result<()> {
     crm_server::init_logging();

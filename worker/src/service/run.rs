@@ -14,11 +14,11 @@ use crm_proto::pb::{self, progress};
 use tokio::sync::mpsc;
 
 use super::{Client, WorkerOptions};
-use crate::commands::EnvArgs;
-use crate::jobs::demos;
-use crate::jobs::eval::{EpisodeRecord, evaluate};
-use crate::jobs::train::Trainer;
 use crate::record::{Recorder, SharedRecorder, lock};
+use crm_run::Env;
+use crm_run::Trainer;
+use crm_run::demos;
+use crm_run::eval::{EpisodeRecord, evaluate};
 
 /// A scratch folder removed on drop.
 struct Scratch(PathBuf);
@@ -178,12 +178,12 @@ fn train(
         &env,
         init.as_ref().map(|(path, resume)| {
             if *resume {
-                crate::jobs::Init::Resume(path)
+                crm_run::Init::Resume(path)
             } else {
-                crate::jobs::Init::FineTune(path)
+                crm_run::Init::FineTune(path)
             }
         }),
-        recorder.clone(),
+        crate::record::for_runtime(&recorder),
     )?;
     let resumed_from = trainer.steps();
     if resumed_from > 0 {
@@ -294,7 +294,7 @@ fn eval(
         &path,
         &spec,
         &env,
-        recorder.clone(),
+        crate::record::for_runtime(&recorder),
         |done, total, record| {
             ship(link, job.job_id, recorder.as_ref());
             let mut sent = link.send(summary(record));
@@ -327,10 +327,10 @@ fn eval(
 /// An episode's summary as the coordinator stores it.
 /// The environment options of a job's world: the built-in one, or the folder of that name
 /// under this worker's `--worlds`.
-fn env_for(world: Option<&str>, options: &WorkerOptions) -> anyhow::Result<EnvArgs> {
+fn env_for(world: Option<&str>, options: &WorkerOptions) -> anyhow::Result<Env> {
     match world {
-        None => Ok(EnvArgs::default()),
-        Some(name) if name == crm_api::worlds::BUILTIN => Ok(EnvArgs::default()),
+        None => Ok(Env::default()),
+        Some(name) if name == crm_api::worlds::BUILTIN => Ok(Env::default()),
         Some(name) => {
             let found = crm_api::worlds::discover(options.worlds.as_deref())?
                 .into_iter()
@@ -341,7 +341,10 @@ fn env_for(world: Option<&str>, options: &WorkerOptions) -> anyhow::Result<EnvAr
                          folder that holds it"
                     )
                 })?;
-            Ok(EnvArgs::default().in_world(found.dir))
+            Ok(Env::new(crm_run::EnvSpec {
+                world: found.dir,
+                ..crm_run::EnvSpec::default()
+            }))
         }
     }
 }

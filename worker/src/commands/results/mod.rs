@@ -46,7 +46,7 @@ pub struct ResultsArgs {
     #[arg(long, default_value_t = 2)]
     pub envs: usize,
     /// Algorithms to compare (repeat; default: all five).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = crate::commands::algorithm())]
     pub algo: Vec<Algorithm>,
     /// PPO settings for crm-ppo, ippo, lppo and ppo (JSON; default: the paper's).
     #[arg(long, value_name = "FILE")]

@@ -9,22 +9,21 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{Context, bail};
 use crm_api::{Algorithm, Iteration, TrainSpec};
 use crm_learn::checkpoint::FORMAT;
 use crm_learn::rollout::Episode;
 use crm_learn::{
     Checkpoint, CheckpointHeader, EarlyStop, Layout, LineageStage, Ppo, Sac, TaskCurriculum, VecEnv,
 };
-use grasp_sim::GraspEnv;
 
-use crate::commands::EnvArgs;
+use crate::Env;
+use crate::error::{Context, Error, Result, invalid};
 use crate::record::{Recorded, SharedRecorder, lock};
 
 /// The sha256 of a file's bytes, hex.
-fn file_sha256(path: &Path) -> anyhow::Result<String> {
+fn file_sha256(path: &Path) -> Result<String> {
     use sha2::{Digest, Sha256};
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let bytes = crate::error::read(path)?;
     Ok(Sha256::digest(&bytes)
         .iter()
         .map(|b| format!("{b:02x}"))
@@ -95,28 +94,20 @@ impl Trainer {
     /// `recorder` records environment 0's episodes (the others never pay for it).
     pub fn new(
         spec: TrainSpec,
-        env: &EnvArgs,
+        env: &Env,
         init: Option<Init<'_>>,
         recorder: Option<SharedRecorder>,
-    ) -> anyhow::Result<Self> {
-        if spec.steps == 0 {
-            bail!("steps must be positive");
-        }
-        spec.config.validate()?;
-        spec.sac.validate()?;
-        crm_api::jobs::check_start_log_std(spec.algorithm, spec.start_log_std)
-            .map_err(|message| anyhow::anyhow!("start_log_std {message}"))?;
-        crm_api::jobs::check_settle_s(spec.settle_s)
-            .map_err(|message| anyhow::anyhow!("settle_s {message}"))?;
+    ) -> Result<Self> {
+        spec.validate().map_err(|err| invalid!("{err}"))?;
         let benchmark = env.benchmark()?;
         let machine = match spec.algorithm {
             Algorithm::Ppo => env.machine_or(grasp_sim::spec::flat_spec())?,
             _ => env.machine()?,
         };
-        let choice = super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
+        let choice = crate::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
         let env_count = spec.envs.unwrap_or_else(rayon::current_num_threads);
         if env_count == 0 {
-            bail!("envs must be at least 1");
+            return Err(invalid!("envs must be at least 1"));
         }
         let spec_hash = machine.spec().hash();
         let layout = Layout::of(&machine);
@@ -132,16 +123,16 @@ impl Trainer {
             lineage = LineageStage::inherited(&header);
             parent_sha256 = Some(file_sha256(path)?);
             if header.algorithm != spec.algorithm.name() {
-                bail!(
+                return Err(invalid!(
                     "checkpoint {} was trained with {}, not {}",
                     path.display(),
                     header.algorithm,
                     spec.algorithm.name()
-                );
+                ));
             }
             match init {
                 Init::Resume(_) => {
-                    super::check_world(&header, env.world()?, path)?;
+                    crate::check_world(&header, env.world()?, path)?;
                     start_steps = header.steps;
                 }
                 // Another world's weights: `Checkpoint::load` below still asks for the same
@@ -193,18 +184,17 @@ impl Trainer {
         };
         let envs = (0..env_count)
             .map(|k| {
-                let mut config = env.config_for(spec.objective, spec.hold_s);
+                let mut config = env.config_for(spec.objective, spec.hold_s)?;
                 config.settle_s = spec.settle_s.unwrap_or(0.0) as f32;
-                let mut grasp = GraspEnv::new(benchmark.clone(), config);
-                choice.apply(&mut grasp)?;
+                let grasp = env.grasp_env(config, &choice)?;
                 let recorder = if k == 0 { recorder.clone() } else { None };
                 Ok(crm::CrmEnv::new(
                     machine.clone(),
                     Recorded::new(grasp, machine.clone(), recorder),
-                    super::reward_mode(spec.algorithm),
+                    crate::reward_mode(spec.algorithm),
                 ))
             })
-            .collect::<anyhow::Result<Vec<_>>>()?;
+            .collect::<Result<Vec<_>>>()?;
         let envs = VecEnv::new(envs, seed)?;
         let stage_names = (0..layout.stages)
             .map(|s| machine.stage_name(s).to_string())
@@ -249,10 +239,10 @@ impl Trainer {
         epochs: usize,
         learning_rate: f64,
         on_epoch: impl FnMut(usize, f32) -> bool,
-    ) -> anyhow::Result<f32> {
+    ) -> Result<f32> {
         let loss = match &mut self.learner {
             Learner::Ppo(ppo) => ppo.imitate_with(demos, epochs, learning_rate, on_epoch)?,
-            Learner::Sac(_) => bail!("behaviour cloning is for the PPO learners"),
+            Learner::Sac(_) => return Err(invalid!("behaviour cloning is for the PPO learners")),
         };
         self.imitation = Some(serde_json::json!({
             "demo_steps": demos.len(),
@@ -270,7 +260,7 @@ impl Trainer {
     }
 
     /// This checkpoint's lineage: the parent's stages, then this run so far.
-    fn lineage(&self) -> anyhow::Result<Vec<LineageStage>> {
+    fn lineage(&self) -> Result<Vec<LineageStage>> {
         let mut lineage = self.lineage.clone();
         lineage.push(LineageStage {
             kind: self.stage_kind.to_string(),
@@ -294,9 +284,9 @@ impl Trainer {
         &mut self,
         states: &[Vec<f32>],
         stages: &[usize],
-    ) -> anyhow::Result<crate::jobs::anchors::PolicyActions> {
+    ) -> Result<crate::anchors::PolicyActions> {
         let Learner::Ppo(ppo) = &mut self.learner else {
-            bail!("behaviour cloning is for the PPO learners");
+            return Err(invalid!("behaviour cloning is for the PPO learners"));
         };
         // The masks weigh only the log-probabilities, which are not wanted here.
         let masks = vec![vec![1.0; ppo.net.layout().actions]; states.len()];
@@ -329,7 +319,7 @@ impl Trainer {
 
     /// One rollout and one learner update (PPO: one update over the rollout; SAC: the
     /// rollout stored, then gradient steps from the replay buffer).
-    pub fn iterate(&mut self) -> anyhow::Result<Iteration> {
+    pub fn iterate(&mut self) -> Result<Iteration> {
         let remaining = self.spec.steps.saturating_sub(self.done) as usize;
         let per_iteration = match self.learner {
             Learner::Ppo(_) => self.spec.config.rollout_steps,
@@ -427,7 +417,7 @@ impl Trainer {
     }
 
     /// Writes the current networks as a checkpoint.
-    pub fn save(&self, path: &Path) -> anyhow::Result<()> {
+    pub fn save(&self, path: &Path) -> Result<()> {
         let header = CheckpointHeader {
             format: FORMAT.to_string(),
             algorithm: self.spec.algorithm.name().to_string(),
@@ -456,8 +446,10 @@ impl Trainer {
             Learner::Ppo(ppo) => Checkpoint::save(&ppo.net, &header, &partial)?,
             Learner::Sac(sac) => Checkpoint::save_sac(&sac.nets, &header, &partial)?,
         }
-        std::fs::rename(&partial, path)
-            .with_context(|| format!("moving the checkpoint to {}", path.display()))?;
+        std::fs::rename(&partial, path).map_err(|error| Error::Io {
+            path: format!("moving the checkpoint to {}", path.display()),
+            error,
+        })?;
         Ok(())
     }
 }
@@ -492,7 +484,7 @@ mod tests {
 
     #[test]
     fn start_log_std_sets_a_fresh_or_fine_tuned_policys_noise_and_a_resume_keeps_its_own() {
-        let env = EnvArgs::default();
+        let env = Env::default();
         let new = |start, init| Trainer::new(spec(Algorithm::CrmPpo, start), &env, init, None);
         let fresh = new(None, None).expect("fresh");
         assert!(all_near(&log_std(&fresh), -0.5), "{:?}", log_std(&fresh));

@@ -1,19 +1,14 @@
-//! Jobs the worker runs, shared by the command line (`crm train`, `crm eval`) and the service
-//! worker (`crm worker`): a training run that advances one PPO iteration at a time and can
-//! resume from a checkpoint, and a checkpoint evaluation over random tasks (Table I).
-
-pub mod anchors;
-pub mod demos;
-pub mod eval;
-pub mod train;
-
-pub use train::Init;
+//! What a job's environments draw (tasks and topologies), the reward its algorithm learns
+//! from, and whether a checkpoint belongs to a world.
 
 use crm_api::Algorithm;
 use grasp_sim::benchmark::Topology;
-use grasp_sim::{Benchmark, GraspEnv, TaskChoice};
+use std::sync::Arc;
 
-/// The reward mode each algorithm learns from (paper, section V-A).
+use grasp_sim::{Benchmark, GraspEnv, SimConfig, TaskChoice};
+
+use crate::error::{Result, invalid};
+
 /// Refuses a checkpoint trained in a world whose hand profile, spec, sensors or hand files
 /// differ from `world`'s (a checkpoint without a world was trained in the built-in one). A
 /// checkpoint that recorded the profile hash alone (written before the hand's files were in
@@ -22,12 +17,12 @@ pub fn check_world(
     header: &crm_learn::checkpoint::CheckpointHeader,
     world: &grasp_sim::World,
     path: &std::path::Path,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     static BUILTIN: std::sync::OnceLock<String> = std::sync::OnceLock::new();
     let builtin = BUILTIN.get_or_init(|| grasp_sim::World::builtin().profile_hash);
     let hash = header.world_hash.as_deref().unwrap_or(builtin);
     if hash != world.hash && hash != world.profile_hash {
-        anyhow::bail!(
+        return Err(invalid!(
             "checkpoint {} was trained in world {:?} (hash {hash}), this is world {:?} (hash {}): \
              the hand profile, the CRM spec, the sensors or the hand's files differ, so its \
              observations and actions mean other things here",
@@ -35,11 +30,12 @@ pub fn check_world(
             header.world.as_deref().unwrap_or("crm"),
             world.name,
             world.hash
-        );
+        ));
     }
     Ok(())
 }
 
+/// The reward mode each algorithm learns from (paper, section V-A).
 pub fn reward_mode(algorithm: Algorithm) -> crm::RewardMode {
     match algorithm {
         Algorithm::Ippo => crm::RewardMode::Sparse,
@@ -62,11 +58,11 @@ impl EnvChoice {
         task: &Option<String>,
         tasks: &[String],
         topology: &Option<String>,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self> {
         let indices = crm_api::jobs::task_list(task, tasks)
             .iter()
-            .map(|id| crate::commands::task_index(benchmark, id))
-            .collect::<anyhow::Result<Vec<_>>>()?;
+            .map(|id| task_index(benchmark, id))
+            .collect::<Result<Vec<_>>>()?;
         let tasks = match indices.as_slice() {
             [] => TaskChoice::Random,
             [one] => TaskChoice::Fixed(*one),
@@ -74,10 +70,10 @@ impl EnvChoice {
         };
         let topologies = match topology.as_deref() {
             None | Some("task") => None,
-            Some("auto") => Some(crate::commands::topology::picks(benchmark, None)?),
+            Some("auto") => Some(crate::topology::picks(benchmark, None)?),
             Some(name) => {
                 let forced = Topology::from_name(name).ok_or_else(|| {
-                    anyhow::anyhow!(
+                    invalid!(
                         "topology: unknown topology {name:?} (task, auto, or one of {})",
                         Topology::ALL.map(Topology::name).join(", ")
                     )
@@ -88,10 +84,18 @@ impl EnvChoice {
         Ok(Self { tasks, topologies })
     }
 
-    /// Applies the choice to an environment.
-    pub fn apply(&self, env: &mut GraspEnv) -> anyhow::Result<()> {
-        env.set_task_choice(self.tasks.clone())?;
+    /// One environment of `benchmark` in `config` that draws this choice's tasks and
+    /// topologies ([`grasp_sim::setup::make_env`], the world's factory).
+    pub fn env(&self, benchmark: &Arc<Benchmark>, config: SimConfig) -> Result<GraspEnv> {
+        let mut env = grasp_sim::setup::make_env(benchmark, config, self.tasks.clone())?;
         env.set_topologies(self.topologies.clone())?;
-        Ok(())
+        Ok(env)
     }
+}
+
+/// The index of a task by id, or a message naming it and pointing at `crm tasks`.
+pub fn task_index(benchmark: &Benchmark, id: &str) -> Result<usize> {
+    benchmark
+        .task_index(id)
+        .ok_or_else(|| invalid!("--task: unknown task {id:?} (see `crm tasks`)"))
 }

@@ -1,18 +1,65 @@
-//! `Recorded`: the grasping environment with an optional recorder. Without one (every
-//! environment but the first in training, and every job that does not record) a step costs
-//! one `Option` check more than `GraspEnv`'s. With one, each episode the recorder picks is
-//! logged step by step: the scene, contacts, the CRM stage and every transition with its
-//! event and transition reward, which this wrapper derives with the same pure
-//! `Machine::step` the `CrmEnv` around it takes.
+//! Recording a job's episodes behind two traits, so that the runtime knows no viewer: a
+//! [`Recorder`] decides which episodes are followed and takes the training series; an
+//! [`EpisodeLog`] follows one episode step by step (the `crm` binary's rerun recorder
+//! implements both). [`Recorded`] is the grasping environment with an optional recorder.
+//! Without one (every environment but the first in training, and every job that does not
+//! record) a step costs one `Option` check more than `GraspEnv`'s. With one, each episode the
+//! recorder picks is logged step by step: the scene, contacts, the CRM stage and every
+//! transition with its event and transition reward, which this wrapper derives with the same
+//! pure `Machine::step` the `CrmEnv` around it takes.
 
-use crm::{EnvStep, Environment, Machine};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use crm::{EnvStep, Environment, Machine, StageId};
+use crm_api::Iteration;
 use grasp_sim::GraspEnv;
 
-use super::{EpisodeStream, SharedRecorder, lock, scene};
-use crate::jobs::eval::EpisodeRecord;
+use crate::eval::EpisodeRecord;
+
+/// Watches a job's episodes and its training series.
+pub trait Recorder: Send {
+    /// Counts an episode starting (`what`: its task and seed); a log when this one is to be
+    /// followed.
+    fn begin_episode(&mut self, what: &str) -> Option<Box<dyn EpisodeLog>>;
+    /// Ends a followed episode; `summary` when it ended (not cut short by a reset).
+    fn end_episode(&mut self, log: Box<dyn EpisodeLog>, summary: Option<EpisodeRecord>);
+    /// One training iteration's series.
+    fn log_iteration(&mut self, iteration: &Iteration);
+}
+
+/// The machine's move in one control step, as a log shows it.
+#[derive(Clone, Copy, Debug)]
+pub struct Move<'a> {
+    pub from: &'a str,
+    pub to: &'a str,
+    pub to_id: StageId,
+    pub intra_reward: f32,
+    pub transition_reward: f32,
+    /// The event that moved the machine, if one did.
+    pub event: Option<&'a str>,
+}
+
+/// One followed episode (`Any`, so its recorder can take back the log it opened).
+pub trait EpisodeLog: Send + std::any::Any {
+    /// The episode's first state, in `stage`.
+    fn start(&mut self, env: &GraspEnv, stage: &str, stage_id: StageId);
+    /// Control step `step`: the world after it and the machine's move (none when the
+    /// machine refused the step).
+    fn step(&mut self, step: i64, env: &GraspEnv, moved: Option<Move<'_>>);
+    /// The end: the stage reached after `steps` steps, or cut short (`truncated`).
+    fn end(&mut self, stage: &str, steps: i64, truncated: bool);
+}
+
+/// A recorder shared between an environment and its job.
+pub type SharedRecorder = Arc<Mutex<dyn Recorder>>;
+
+/// Locks a shared recorder; a poisoned lock still holds usable counters.
+pub fn lock(recorder: &SharedRecorder) -> MutexGuard<'_, dyn Recorder + 'static> {
+    recorder.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 struct Episode {
-    stream: EpisodeStream,
+    log: Box<dyn EpisodeLog>,
     step: i64,
     stage: crm::StageId,
     /// What the job reports of the episode when it ends (its transitions, its return).
@@ -50,7 +97,7 @@ impl Recorded {
     /// summary is kept.
     fn finish(&mut self, ended: bool) {
         if let (Some(episode), Some(recorder)) = (self.episode.take(), &self.recorder) {
-            lock(recorder).end_episode(episode.stream, ended.then_some(episode.summary));
+            lock(recorder).end_episode(episode.log, ended.then_some(episode.summary));
         }
     }
 
@@ -59,24 +106,13 @@ impl Recorded {
             return;
         };
         let what = format!("{} seed {seed}", self.inner.task().id);
-        let Some(stream) = lock(recorder).begin_episode(&what) else {
+        let Some(mut log) = lock(recorder).begin_episode(&what) else {
             return;
         };
         let stage = self.machine.initial();
-        let rec = &stream.rec;
-        rec.set_time_sequence("step", 0);
-        let parts = self.inner.parts();
-        let logged = scene::log_shapes(rec, &parts)
-            .and_then(|()| scene::log_poses(rec, &parts))
-            .and_then(|()| {
-                scene::log_contacts(rec, &[], self.inner.grasp_location().map(Into::into))
-            })
-            .and_then(|()| scene::log_stage(rec, self.machine.stage_name(stage), stage, true));
-        if let Err(err) = logged {
-            tracing::warn!(%err, "recording an episode's start");
-        }
+        log.start(&self.inner, self.machine.stage_name(stage), stage);
         self.episode = Some(Episode {
-            stream,
+            log,
             step: 0,
             stage,
             summary: EpisodeRecord {
@@ -96,47 +132,33 @@ impl Recorded {
             return;
         };
         episode.step += 1;
-        let rec = &episode.stream.rec;
-        rec.set_time_sequence("step", episode.step);
         let fired: Vec<usize> = step
             .events
             .iter()
             .filter_map(|name| self.machine.event_id(name))
             .collect();
         let outcome = self.machine.step(episode.stage, &step.observation, &fired);
-        let parts = self.inner.parts();
-        let mut logged = scene::log_poses(rec, &parts).and_then(|()| {
-            scene::log_contacts(
-                rec,
-                &self.inner.contacts_view(),
-                self.inner.grasp_location().map(Into::into),
-            )
-        });
         let mut ended = step.truncated;
-        if let Ok(outcome) = &outcome {
-            let from = self.machine.stage_name(outcome.from);
-            let to = self.machine.stage_name(outcome.next);
-            logged = logged
-                .and_then(|()| {
-                    scene::log_rewards(rec, outcome.intra_reward, outcome.transition_reward)
-                })
-                .and_then(|()| {
-                    scene::log_stage(rec, to, outcome.next, outcome.next != outcome.from)
-                });
+        let moved = outcome.as_ref().ok().map(|outcome| Move {
+            from: self.machine.stage_name(outcome.from),
+            to: self.machine.stage_name(outcome.next),
+            to_id: outcome.next,
+            intra_reward: outcome.intra_reward,
+            transition_reward: outcome.transition_reward,
+            event: outcome.event.map(|event| self.machine.event_name(event)),
+        });
+        episode.log.step(episode.step, &self.inner, moved);
+        if let (Ok(outcome), Some(moved)) = (&outcome, moved) {
             let summary = &mut episode.summary;
             summary.length = episode.step as usize;
             summary.total_return +=
                 f64::from(outcome.intra_reward) + f64::from(outcome.transition_reward);
-            if let Some(event) = outcome.event {
-                let event = self.machine.event_name(event);
-                logged = logged.and_then(|()| {
-                    scene::log_transition(rec, from, to, event, outcome.transition_reward)
-                });
+            if let Some(event) = moved.event {
                 summary.transitions.push((
                     // 0-based, as the machine's history counts.
                     summary.length - 1,
-                    from.to_string(),
-                    to.to_string(),
+                    moved.from.to_string(),
+                    moved.to.to_string(),
                     event.to_string(),
                     outcome.transition_reward,
                 ));
@@ -152,12 +174,7 @@ impl Recorded {
                 self.inner
                     .outcome_label(if done { stage } else { "truncated" });
             episode.summary.sim_seconds = f64::from(self.inner.sim_seconds());
-            logged = logged.and_then(|()| scene::log_end(rec, stage, episode.step, !done));
-        }
-        if let Err(err) = logged {
-            tracing::warn!(%err, "recording a step");
-        }
-        if ended {
+            episode.log.end(stage, episode.step, !done);
             self.finish(true);
         }
     }

@@ -6,16 +6,15 @@
 
 use std::sync::Arc;
 
-use anyhow::bail;
 use crm_api::{ImitationSpec, TrainSpec};
 use crm_learn::Demos;
 use grasp_sim::oracle::Oracle;
-use grasp_sim::{Benchmark, GraspEnv, SimConfig};
+use grasp_sim::{Benchmark, SimConfig};
 use rayon::prelude::*;
 
-use super::EnvChoice;
-use super::train::Trainer;
-use crate::commands::EnvArgs;
+use crate::error::{Result, invalid};
+use crate::train::Trainer;
+use crate::{Env, EnvChoice};
 
 /// Where demonstrations come from: the environments, the first seed and the noise on the
 /// oracle's executed actions.
@@ -35,7 +34,7 @@ pub struct DemoSource<'a> {
     /// The stages (indices) whose rows are kept; empty: every stage.
     pub stages: &'a [usize],
     /// Task indices whose episodes give no anchor rows (the demonstrated tasks; see
-    /// [`super::anchors::policy_anchors`]).
+    /// [`crate::anchors::policy_anchors`]).
     pub skip: &'a [usize],
 }
 
@@ -53,12 +52,12 @@ pub struct Collected {
 /// Runs `episodes` oracle episodes; keeps the rows of the successful ones (the tests' form of
 /// [`oracle_demos_with`]).
 #[cfg(test)]
-pub fn oracle_demos(source: &DemoSource, episodes: u64) -> anyhow::Result<Collected> {
+pub fn oracle_demos(source: &DemoSource, episodes: u64) -> Result<Collected> {
     Ok(oracle_demos_with(source, episodes, |_| true)?.unwrap_or_default())
 }
 
 /// Episodes run in parallel per block of this many; progress is told between blocks.
-pub(super) const BLOCK: u64 = 64;
+pub(crate) const BLOCK: u64 = 64;
 
 /// [`oracle_demos`], calling `progress(episodes done)` after each block of episodes; `None`
 /// when `progress` answers `false` (the job was cancelled). The same demonstrations whatever
@@ -67,7 +66,7 @@ pub fn oracle_demos_with(
     source: &DemoSource,
     episodes: u64,
     mut progress: impl FnMut(u64) -> bool,
-) -> anyhow::Result<Option<Collected>> {
+) -> Result<Option<Collected>> {
     let mut all = Collected {
         episodes,
         ..Collected::default()
@@ -75,7 +74,7 @@ pub fn oracle_demos_with(
     let mut start = 0;
     while start < episodes {
         let end = (start + BLOCK).min(episodes);
-        let results: Vec<anyhow::Result<(bool, Demos)>> = (start..end)
+        let results: Vec<Result<(bool, Demos)>> = (start..end)
             .into_par_iter()
             .map(|k| episode(source, source.seed.wrapping_add(k)))
             .collect();
@@ -96,9 +95,8 @@ pub fn oracle_demos_with(
 }
 
 /// One oracle episode; returns whether it succeeded and its rows (the clean labels).
-fn episode(source: &DemoSource, seed: u64) -> anyhow::Result<(bool, Demos)> {
-    let mut grasp = GraspEnv::new(source.benchmark.clone(), source.config.clone());
-    source.choice.apply(&mut grasp)?;
+fn episode(source: &DemoSource, seed: u64) -> Result<(bool, Demos)> {
+    let grasp = source.choice.env(source.benchmark, source.config.clone())?;
     let mut env = crm::CrmEnv::new(source.machine.clone(), grasp, crm::RewardMode::Crm);
     let (mut stage, mut state) = env.reset(seed)?;
     let shift = source.shifts.get(env.env().task_index()).copied();
@@ -138,7 +136,7 @@ fn episode(source: &DemoSource, seed: u64) -> anyhow::Result<(bool, Demos)> {
 }
 
 /// Whether a row of `stage` is kept under a stage filter (empty: every stage).
-pub(super) fn keeps(stages: &[usize], stage: usize) -> bool {
+pub(crate) fn keeps(stages: &[usize], stage: usize) -> bool {
     stages.is_empty() || stages.contains(&stage)
 }
 
@@ -147,11 +145,11 @@ pub(super) fn keeps(stages: &[usize], stage: usize) -> bool {
 pub fn shifts_by_task(
     benchmark: &Benchmark,
     shifts: &std::collections::BTreeMap<String, [f64; 3]>,
-) -> anyhow::Result<Vec<[f32; 3]>> {
+) -> Result<Vec<[f32; 3]>> {
     let mut by_task = vec![[0.0; 3]; benchmark.tasks.len()];
     for (id, shift) in shifts {
         let Some(task) = benchmark.task_index(id) else {
-            bail!("unknown task {id:?} (see `crm tasks`)");
+            return Err(invalid!("unknown task {id:?} (see `crm tasks`)"));
         };
         by_task[task] = shift.map(|v| v as f32);
     }
@@ -170,18 +168,18 @@ pub const PHASE_CLONING: &str = "behaviour cloning";
 /// as when it was cancelled meanwhile).
 pub fn imitate(
     spec: &TrainSpec,
-    env: &EnvArgs,
+    env: &Env,
     trainer: &mut Trainer,
     mut note: impl FnMut(&str) -> bool,
     mut phase: impl FnMut(&str, u64, u64) -> bool,
-) -> anyhow::Result<bool> {
+) -> Result<bool> {
     let Some(imitation) = &spec.imitation else {
         return Ok(true);
     };
     if !ImitationSpec::supports(spec.algorithm) {
-        bail!(
+        return Err(invalid!(
             "imitation: behaviour cloning is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo)"
-        );
+        ));
     }
     let started = std::time::Instant::now();
     let benchmark = env.benchmark()?;
@@ -191,18 +189,18 @@ pub fn imitate(
         .tasks
         .iter()
         .map(|id| {
-            benchmark.task_index(id).ok_or_else(|| {
-                anyhow::anyhow!("imitation.tasks: unknown task {id:?} (see `crm tasks`)")
-            })
+            benchmark
+                .task_index(id)
+                .ok_or_else(|| invalid!("imitation.tasks: unknown task {id:?} (see `crm tasks`)"))
         })
-        .collect::<anyhow::Result<Vec<usize>>>()?;
+        .collect::<Result<Vec<usize>>>()?;
     let choice = if imitation.tasks.is_empty() {
         EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?
     } else {
         EnvChoice::of(&benchmark, &None, &imitation.tasks, &spec.topology)?
     };
     let shifts = shifts_by_task(&benchmark, &imitation.shifts)
-        .map_err(|e| anyhow::anyhow!("imitation.shifts: {e}"))?;
+        .map_err(|e| invalid!("imitation.shifts: {e}"))?;
     let stages = imitation
         .stages
         .iter()
@@ -211,14 +209,14 @@ pub fn imitate(
                 let names: Vec<&str> = (0..machine.stage_count())
                     .map(|s| machine.stage_name(s))
                     .collect();
-                anyhow::anyhow!(
+                invalid!(
                     "imitation.stages: unknown stage {name:?} (this world's machine has {})",
                     names.join(", ")
                 )
             })
         })
-        .collect::<anyhow::Result<Vec<usize>>>()?;
-    let config = env.config_for(spec.objective, spec.hold_s);
+        .collect::<Result<Vec<usize>>>()?;
+    let config = env.config_for(spec.objective, spec.hold_s)?;
     let source = DemoSource {
         benchmark: &benchmark,
         config: &config,
@@ -246,7 +244,7 @@ pub fn imitate(
             skip: &demonstrated,
             ..source
         };
-        let rows = super::anchors::policy_anchors(
+        let rows = crate::anchors::policy_anchors(
             &anchor_source,
             anchors,
             |states, stages| trainer.policy_actions(states, stages),

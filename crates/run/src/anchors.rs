@@ -8,7 +8,8 @@ use crm_learn::Demos;
 use grasp_sim::GraspEnv;
 use rayon::prelude::*;
 
-use super::demos::{BLOCK, DemoSource, keeps};
+use crate::demos::{BLOCK, DemoSource, keeps};
+use crate::error::Result;
 
 /// A policy's actions at a batch of abstract states in their stages: the ones it executes
 /// (sampled) and its means (the labels).
@@ -23,9 +24,9 @@ pub type PolicyActions = (Vec<Vec<f32>>, Vec<Vec<f32>>);
 pub fn policy_anchors(
     source: &DemoSource,
     episodes: u64,
-    mut act: impl FnMut(&[Vec<f32>], &[usize]) -> anyhow::Result<PolicyActions>,
+    mut act: impl FnMut(&[Vec<f32>], &[usize]) -> Result<PolicyActions>,
     mut progress: impl FnMut(u64) -> bool,
-) -> anyhow::Result<Option<Demos>> {
+) -> Result<Option<Demos>> {
     struct Running {
         env: crm::CrmEnv<GraspEnv>,
         stage: usize,
@@ -39,8 +40,7 @@ pub fn policy_anchors(
         let end = (start + BLOCK).min(episodes);
         let mut running = (start..end)
             .map(|k| {
-                let mut grasp = GraspEnv::new(source.benchmark.clone(), source.config.clone());
-                source.choice.apply(&mut grasp)?;
+                let grasp = source.choice.env(source.benchmark, source.config.clone())?;
                 let mut env = crm::CrmEnv::new(source.machine.clone(), grasp, crm::RewardMode::Crm);
                 let (stage, state) = env.reset(source.seed.wrapping_add(k))?;
                 let over = source.skip.contains(&env.env().task_index());
@@ -52,7 +52,7 @@ pub fn policy_anchors(
                     rows: Demos::default(),
                 })
             })
-            .collect::<anyhow::Result<Vec<_>>>()?;
+            .collect::<Result<Vec<_>>>()?;
         loop {
             let live: Vec<usize> = (0..running.len()).filter(|&i| !running[i].over).collect();
             if live.is_empty() {
@@ -76,7 +76,7 @@ pub fn policy_anchors(
                 .par_iter_mut()
                 .zip(actions)
                 .filter_map(|(r, action)| action.map(|a| (r, a)))
-                .try_for_each(|(r, action)| -> anyhow::Result<()> {
+                .try_for_each(|(r, action)| -> Result<()> {
                     let step = r.env.step(&action)?;
                     r.over = step.done || step.truncated;
                     (r.stage, r.state) = (step.stage, step.abstract_state);
@@ -101,7 +101,7 @@ mod tests {
     use grasp_sim::{Benchmark, SimConfig, TaskChoice};
 
     use super::*;
-    use crate::jobs::EnvChoice;
+    use crate::EnvChoice;
 
     #[test]
     fn anchor_states_are_the_policys_own_rows_but_the_skipped_tasks_and_stages_filter_rows() {

@@ -4,14 +4,15 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::{Context, bail};
 use candle_core::{Device, Tensor};
 use crm_api::{EvalReport, EvalSpec, Row};
 use crm_learn::{Actor, Checkpoint, Layout, Noise, Ppo, PpoConfig, SacNets};
+use grasp_sim::SimConfig;
 use grasp_sim::benchmark::Objective;
-use grasp_sim::{GraspEnv, SimConfig};
 
-use crate::commands::EnvArgs;
+use crate::Env;
+use crate::error::{Context, Error, Result, invalid};
+use crate::record::{Recorded, SharedRecorder};
 
 /// A checkpoint's networks: the PPO family's actor-critic or SAC's actor and critics.
 pub enum PolicyNet {
@@ -34,9 +35,9 @@ pub struct LoadedPolicy {
 impl LoadedPolicy {
     /// Loads `path` for the machine its algorithm trains in (the flat one for `ppo`), to act
     /// in the world's settings `config` (which say the dimensions it folds).
-    pub fn load(path: &Path, env: &EnvArgs, config: &SimConfig) -> anyhow::Result<Self> {
+    pub fn load(path: &Path, env: &Env, config: &SimConfig) -> Result<Self> {
         let header = Checkpoint::read_header(path)?;
-        super::check_world(&header, env.world()?, path)?;
+        crate::check_world(&header, env.world()?, path)?;
         let algorithm = header.algorithm;
         let machine = if algorithm == "ppo" {
             env.machine_or(grasp_sim::spec::flat_spec())?
@@ -58,11 +59,11 @@ impl LoadedPolicy {
             (PolicyNet::Ppo(Box::new(ppo)), header)
         };
         if header.layout != Layout::of(&machine) {
-            bail!(
+            return Err(invalid!(
                 "checkpoint {}: network layout {:?} does not fit the machine",
                 path.display(),
                 header.layout
-            );
+            ));
         }
         Ok(Self {
             net,
@@ -82,7 +83,7 @@ impl LoadedPolicy {
         stage: usize,
         mask: &[f32],
         noise: Option<&mut Noise>,
-    ) -> anyhow::Result<Vec<f32>> {
+    ) -> Result<Vec<f32>> {
         let action = match (&mut self.net, noise) {
             (PolicyNet::Ppo(ppo), None) => ppo.act_folded(state, stage, mask, &self.folded)?,
             (PolicyNet::Ppo(ppo), Some(noise)) => ppo.act_one(state, stage, mask, noise)?.0,
@@ -104,7 +105,7 @@ impl LoadedPolicy {
     }
 
     /// The critic's value of the state (SAC: `min Q` of the deterministic action).
-    pub fn value(&self, state: &[f32], stage: usize, mask: &[f32]) -> anyhow::Result<f32> {
+    pub fn value(&self, state: &[f32], stage: usize, mask: &[f32]) -> Result<f32> {
         let value = match &self.net {
             PolicyNet::Ppo(ppo) => {
                 let input = ppo.net.input(&[state.to_vec()], &[stage])?;
@@ -175,11 +176,11 @@ impl Sums {
 pub fn evaluate(
     path: &Path,
     spec: &EvalSpec,
-    env: &EnvArgs,
-    recorder: Option<crate::record::SharedRecorder>,
+    env: &Env,
+    recorder: Option<SharedRecorder>,
     progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
-) -> anyhow::Result<EvalReport> {
-    let config = env.config_for(spec.objective, spec.hold_s);
+) -> Result<EvalReport> {
+    let config = env.config_for(spec.objective, spec.hold_s)?;
     evaluate_in(path, spec, env, config, recorder, progress)
 }
 
@@ -188,21 +189,19 @@ pub fn evaluate(
 pub fn evaluate_in(
     path: &Path,
     spec: &EvalSpec,
-    env: &EnvArgs,
+    env: &Env,
     config: SimConfig,
-    recorder: Option<crate::record::SharedRecorder>,
+    recorder: Option<SharedRecorder>,
     mut progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
-) -> anyhow::Result<EvalReport> {
-    if spec.episodes == 0 {
-        bail!("episodes must be positive");
-    }
+) -> Result<EvalReport> {
+    spec.validate().map_err(|err| invalid!("{err}"))?;
     let benchmark = env.benchmark()?;
     let mut policy = LoadedPolicy::load(path, env, &config)?;
     let (algorithm, trained_steps) = (policy.algorithm.clone(), policy.trained_steps);
     let machine = policy.machine.clone();
-    let mut grasp = GraspEnv::new(benchmark.clone(), config);
-    super::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?.apply(&mut grasp)?;
-    let recorded = crate::record::Recorded::new(grasp, machine.clone(), recorder);
+    let choice = crate::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
+    let grasp = env.grasp_env(config, &choice)?;
+    let recorded = Recorded::new(grasp, machine.clone(), recorder);
     let mut crm_env = crm::CrmEnv::new(machine, recorded, crm::RewardMode::Crm);
     // The policy's noise when it samples (the default, as the paper's evaluation): seeded.
     let mut noise = (!spec.deterministic).then(|| Noise::new(spec.seed ^ 0x00E7_A1ED_5EED));
@@ -265,7 +264,10 @@ pub fn evaluate_in(
                 .collect(),
         };
         if !progress(k + 1, spec.episodes, &record) {
-            bail!("cancelled after {} of {} episodes", k + 1, spec.episodes);
+            return Err(Error::Cancelled {
+                done: k + 1,
+                total: spec.episodes,
+            });
         }
     }
     let overall = overall.row();
