@@ -48,6 +48,17 @@ fn a_sweep_is_validated_whole_runs_its_grid_and_aggregates_table_one() {
             400,
         ),
         (
+            json!({"base": base, "axes": {"config.colour": [1]}}),
+            "axes.config.colour",
+            400,
+        ),
+        // Every field of the training spec is an axis (settle_s included), checked as a job.
+        (
+            json!({"base": base, "axes": {"algorithm": ["lppo"], "settle_s": [0.5, 9.0]}}),
+            "axes.settle_s[1]",
+            400,
+        ),
+        (
             json!({"base": base, "axes": {"seed": []}}),
             "axes.seed",
             400,

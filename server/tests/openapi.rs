@@ -47,6 +47,20 @@ fn the_binary_refuses_bad_settings_with_exit_code_2() {
 }
 
 #[test]
+fn the_documents_sweep_axes_are_the_training_specs_fields() {
+    let doc: serde_json::Value =
+        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
+    let listed = doc["components"]["schemas"]["SweepRequest"]["properties"]["axes"]["properties"]
+        .as_object()
+        .expect("axes");
+    let mut listed: Vec<&str> = listed.keys().map(String::as_str).collect();
+    let mut axes = crm_server::api::axis_names();
+    listed.sort_unstable();
+    axes.sort_unstable();
+    assert_eq!(listed, axes);
+}
+
+#[test]
 fn the_documents_task_and_topology_enums_are_the_catalogs() {
     let doc: serde_json::Value =
         serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");

@@ -8,6 +8,7 @@ pub mod algorithm;
 pub mod catalog;
 pub mod checkpoint;
 pub mod config;
+pub mod fields;
 pub mod imitation;
 pub mod jobs;
 pub mod names;

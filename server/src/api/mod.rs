@@ -12,6 +12,8 @@ mod jobs;
 pub mod rate;
 mod resources;
 mod sweeps;
+
+pub use sweeps::axis_names;
 mod table;
 
 use std::sync::Arc;

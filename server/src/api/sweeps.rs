@@ -13,6 +13,7 @@ use axum::extract::rejection::BytesRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
+use crm_api::{PpoConfig, SacConfig, TrainSpec};
 use serde_json::{Map, Value, json};
 
 use super::error::{ApiError, parse_id};
@@ -21,22 +22,50 @@ use super::table;
 use crate::AppState;
 use crate::store::NewJob;
 
-/// Top-level fields of a training spec an axis may vary (besides `config.KEY`, `sac.KEY`).
-const AXES: [&str; 13] = [
-    "algorithm",
-    "seed",
-    "steps",
-    "task",
-    "tasks",
-    "topology",
-    "envs",
-    "objective",
-    "curriculum",
-    "hold_s",
-    "imitation",
-    "record",
-    "start_log_std",
-];
+/// Fields of a training spec that are not axes: a sweep runs in its base's world (one world
+/// per table), a fine-tune names one stored checkpoint, and `config` and `sac` vary by key.
+const NOT_AXES: [&str; 4] = ["world", "fine_tune", "config", "sac"];
+
+/// The top-level fields of a training spec an axis may vary (read from `TrainSpec` itself),
+/// besides `config.KEY` and `sac.KEY`.
+fn axis_fields() -> Vec<&'static str> {
+    crm_api::fields::field_names::<TrainSpec>()
+        .iter()
+        .copied()
+        .filter(|field| !NOT_AXES.contains(field))
+        .collect()
+}
+
+/// Every axis name: the fields of [`axis_fields`], then `config.KEY` and `sac.KEY` for each
+/// PPO and SAC setting (what the OpenAPI document lists).
+pub fn axis_names() -> Vec<String> {
+    let nested = |prefix: &str, fields: &[&str]| -> Vec<String> {
+        fields
+            .iter()
+            .map(|field| format!("{prefix}.{field}"))
+            .collect()
+    };
+    axis_fields()
+        .into_iter()
+        .map(String::from)
+        .chain(nested(
+            "config",
+            crm_api::fields::field_names::<PpoConfig>(),
+        ))
+        .chain(nested("sac", crm_api::fields::field_names::<SacConfig>()))
+        .collect()
+}
+
+/// Whether `key` names an axis: a field of [`axes`], or `config.KEY` / `sac.KEY` with KEY a
+/// field of `PpoConfig` / `SacConfig`.
+fn is_axis(key: &str) -> bool {
+    match key.split_once('.') {
+        Some(("config", inner)) => crm_api::fields::field_names::<PpoConfig>().contains(&inner),
+        Some(("sac", inner)) => crm_api::fields::field_names::<SacConfig>().contains(&inner),
+        Some(_) => false,
+        None => axis_fields().contains(&key),
+    }
+}
 
 /// `base` with the axis values of one grid point set (`config.KEY` inside `config`).
 fn point(base: &Map<String, Value>, values: &[(&str, &Value)]) -> Value {
@@ -151,17 +180,12 @@ async fn plan(state: &AppState, body: Value) -> Result<Plan, ApiError> {
     let mut lists: Vec<(&str, &Vec<Value>)> = Vec::new();
     let mut total = 1usize;
     for (key, values) in &axes {
-        let known = AXES.contains(&key.as_str())
-            || key
-                .strip_prefix("config.")
-                .or_else(|| key.strip_prefix("sac."))
-                .is_some_and(|k| !k.is_empty() && !k.contains('.'));
-        if !known {
+        if !is_axis(key) {
             return Err(ApiError::invalid(
                 format!("axes.{key}"),
                 format!(
-                    "unknown axis: one of {}, config.KEY or sac.KEY",
-                    AXES.join(", ")
+                    "unknown axis: one of {}, config.KEY or sac.KEY (a PPO or SAC setting)",
+                    axis_fields().join(", ")
                 ),
             ));
         }
