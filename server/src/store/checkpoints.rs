@@ -6,11 +6,10 @@
 use std::path::PathBuf;
 
 use serde::Serialize;
-use sqlx::FromRow;
 
 use super::{Result, Store, StoreError, now_ms, remove_file};
 
-#[derive(Clone, Debug, Serialize, FromRow)]
+#[derive(Clone, Debug, Serialize)]
 pub struct CheckpointRow {
     pub id: i64,
     /// The training job that saved it; `None` for an uploaded checkpoint.
@@ -26,6 +25,18 @@ pub struct CheckpointRow {
     /// An uploaded checkpoint's label.
     pub name: Option<String>,
 }
+
+crate::store::from_row!(CheckpointRow {
+    id,
+    job_id,
+    algorithm,
+    steps,
+    size,
+    file,
+    created_at,
+    sha256,
+    name
+});
 
 /// A checkpoint to record whose bytes are already at `file` in the checkpoint folder.
 pub struct NewCheckpoint<'a> {
@@ -181,7 +192,7 @@ mod tests {
             .create_if_missing(true)
             .foreign_keys(true);
         let mut conn = options.connect().await.expect("connect");
-        let all = sqlx::migrate!("../migrations");
+        let all = crate::store::migrations::migrator().await.expect("migrations");
         let before = Migrator {
             migrations: Cow::Owned(
                 all.migrations

@@ -8,9 +8,27 @@ use std::time::Duration;
 
 use serde::Serialize;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
-use sqlx::{ConnectOptions, Connection, FromRow, SqlitePool};
+use sqlx::{ConnectOptions, Connection, SqlitePool};
+
+/// `sqlx::FromRow` by column name for a row struct whose fields are its columns: sqlx's derive
+/// without its proc-macro crate (see `migrations.rs`). Every field must be listed (the struct
+/// literal refuses a missing one).
+macro_rules! from_row {
+    ($row:ident { $($field:ident),* $(,)? }) => {
+        impl<'r> sqlx::FromRow<'r, sqlx::sqlite::SqliteRow> for $row {
+            fn from_row(row: &'r sqlx::sqlite::SqliteRow) -> Result<Self, sqlx::Error> {
+                use sqlx::Row;
+                Ok(Self {
+                    $($field: row.try_get(stringify!($field))?,)*
+                })
+            }
+        }
+    };
+}
+pub(crate) use from_row;
 
 mod checkpoints;
+pub(crate) mod migrations;
 mod recordings;
 mod sweeps;
 #[cfg(test)]
@@ -28,7 +46,7 @@ pub fn now_ms() -> i64 {
 }
 
 /// A job as stored.
-#[derive(Clone, Debug, Serialize, FromRow)]
+#[derive(Clone, Debug, Serialize)]
 pub struct Job {
     pub id: i64,
     pub kind: String,
@@ -58,6 +76,30 @@ pub struct Job {
     pub sweep_id: Option<i64>,
 }
 
+crate::store::from_row!(Job {
+    id,
+    kind,
+    state,
+    algorithm,
+    task,
+    spec,
+    checkpoint_id,
+    rerun_of,
+    worker_id,
+    attempts,
+    lease_expires_at,
+    progress,
+    steps,
+    steps_per_s,
+    result,
+    error,
+    created_at,
+    started_at,
+    finished_at,
+    phase,
+    sweep_id
+});
+
 /// Stored JSON text goes out as JSON, not as a string.
 fn as_json<S: serde::Serializer>(text: &str, s: S) -> Result<S::Ok, S::Error> {
     let value: serde_json::Value =
@@ -72,7 +114,7 @@ fn as_json_opt<S: serde::Serializer>(text: &Option<String>, s: S) -> Result<S::O
     }
 }
 
-#[derive(Clone, Debug, Serialize, FromRow)]
+#[derive(Clone, Debug, Serialize)]
 pub struct Worker {
     pub id: String,
     pub name: String,
@@ -82,7 +124,16 @@ pub struct Worker {
     pub last_heartbeat: i64,
 }
 
-#[derive(Clone, Debug, Serialize, FromRow)]
+crate::store::from_row!(Worker {
+    id,
+    name,
+    cores,
+    version,
+    registered_at,
+    last_heartbeat
+});
+
+#[derive(Clone, Debug, Serialize)]
 pub struct Metric {
     pub steps: i64,
     pub iteration: i64,
@@ -90,6 +141,13 @@ pub struct Metric {
     #[serde(serialize_with = "as_json")]
     pub data: String,
 }
+
+crate::store::from_row!(Metric {
+    steps,
+    iteration,
+    wall_s,
+    data
+});
 
 /// Filters for listing jobs.
 #[derive(Clone, Debug, Default)]
@@ -175,7 +233,7 @@ impl Store {
         // Migrations run on their own connection with foreign keys off: rebuilding a table
         // (SQLite's way to change a column) drops one that other rows reference.
         let mut conn = options.clone().foreign_keys(false).connect().await?;
-        sqlx::migrate!("../migrations").run(&mut conn).await?;
+        migrations::migrator().await?.run(&mut conn).await?;
         conn.close().await?;
         let pool = SqlitePoolOptions::new()
             .max_connections(8)

@@ -5,13 +5,12 @@
 use std::path::PathBuf;
 
 use serde::Serialize;
-use sqlx::FromRow;
 use tokio::io::{AsyncSeekExt, AsyncWriteExt};
 
 use super::{Result, Store, now_ms};
 
 /// A job's recording as stored.
-#[derive(Clone, Debug, Serialize, FromRow)]
+#[derive(Clone, Debug, Serialize)]
 pub struct RecordingRow {
     pub job_id: i64,
     /// File name under `<data dir>/recordings/`.
@@ -21,6 +20,14 @@ pub struct RecordingRow {
     pub episodes: i64,
     pub updated_at: i64,
 }
+
+crate::store::from_row!(RecordingRow {
+    job_id,
+    file,
+    size,
+    episodes,
+    updated_at
+});
 
 impl Store {
     pub fn recording_path(&self, row: &RecordingRow) -> PathBuf {

@@ -4,7 +4,6 @@
 //! in the same transaction, so a crash between the two cannot lose it.
 
 use serde::Serialize;
-use sqlx::FromRow;
 
 use super::{
     JOB_COLUMNS, Job, Lease, NewJob, Result, Store, StoreError, as_json, finish_row, insert_job,
@@ -12,7 +11,7 @@ use super::{
 };
 
 /// A sweep as stored.
-#[derive(Clone, Debug, Serialize, FromRow)]
+#[derive(Clone, Debug, Serialize)]
 pub struct SweepRow {
     pub id: i64,
     pub name: String,
@@ -21,6 +20,13 @@ pub struct SweepRow {
     pub spec: String,
     pub created_at: i64,
 }
+
+crate::store::from_row!(SweepRow {
+    id,
+    name,
+    spec,
+    created_at
+});
 
 impl Store {
     /// Stores a sweep and queues its jobs, all in one transaction.
