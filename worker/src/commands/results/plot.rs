@@ -78,8 +78,10 @@ pub fn bands(
     // Registering twice is harmless; plotters keeps the first.
     plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
         .map_err(|_| anyhow::anyhow!("the bundled font is not a font"))?;
-    let draw = || -> Result<(), Box<dyn std::error::Error>> {
-        let root = BitMapBackend::new(path, (900, 540)).into_drawing_area();
+    let (width, height) = (900, 540);
+    let mut pixels = vec![0u8; width as usize * height as usize * 3];
+    let mut draw = || -> Result<(), Box<dyn std::error::Error>> {
+        let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
         root.fill(&WHITE)?;
         let x_max = curves
             .iter()
@@ -134,7 +136,22 @@ pub fn bands(
         root.present()?;
         Ok(())
     };
-    draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))
+    draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))?;
+    write_png(path, width, height, &pixels)
+}
+
+/// `pixels` (RGB, row by row) as a PNG file, by the `png` crate the rerun SDK's `image`
+/// already builds (plotters' own encoder would build an older `image` with JPEG and BMP).
+fn write_png(path: &Path, width: u32, height: u32, pixels: &[u8]) -> anyhow::Result<()> {
+    let file = std::fs::File::create(path)
+        .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder
+        .write_header()
+        .and_then(|mut writer| writer.write_image_data(pixels))
+        .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))
 }
 
 #[cfg(test)]
