@@ -192,7 +192,9 @@ mod tests {
             .create_if_missing(true)
             .foreign_keys(true);
         let mut conn = options.connect().await.expect("connect");
-        let all = crate::store::migrations::migrator().await.expect("migrations");
+        let all = crate::store::migrations::migrator()
+            .await
+            .expect("migrations");
         let before = Migrator {
             migrations: Cow::Owned(
                 all.migrations
