@@ -11,9 +11,7 @@ use rayon::prelude::*;
 use crate::demos::{BLOCK, DemoSource, keeps};
 use crate::error::Result;
 
-/// A policy's actions at a batch of abstract states in their stages: the ones it executes
-/// (sampled) and its means (the labels).
-pub type PolicyActions = (Vec<Vec<f32>>, Vec<Vec<f32>>);
+pub use crate::train::PolicyActions;
 
 /// Anchor states: `episodes` episodes of the policy that `act` runs (episode `k` resets with
 /// `seed + k`; those of a block run side by side, their physics in parallel), every row of

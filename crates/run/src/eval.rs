@@ -12,6 +12,7 @@ use grasp_sim::benchmark::Objective;
 
 use crate::Env;
 use crate::error::{Context, Error, Result, invalid};
+pub use crate::record::EpisodeRecord;
 use crate::record::{Recorded, SharedRecorder};
 
 /// A checkpoint's networks: the PPO family's actor-critic or SAC's actor and critics.
@@ -120,21 +121,6 @@ impl LoadedPolicy {
         };
         Ok(value.to_vec1::<f32>()?.first().copied().unwrap_or(0.0))
     }
-}
-
-/// One finished evaluation episode, with the machine's transition history.
-#[derive(Clone, Debug)]
-pub struct EpisodeRecord {
-    pub task: String,
-    pub success: bool,
-    /// How it ended (`success`, `failure (dropped)`, ...: [`grasp_sim::events::outcome_label`]).
-    pub outcome: String,
-    /// Simulated seconds, the arm's execution included.
-    pub sim_seconds: f64,
-    pub length: usize,
-    pub total_return: f64,
-    /// (step, from stage, to stage, event, transition reward).
-    pub transitions: Vec<(usize, String, String, String, f32)>,
 }
 
 /// Running sums of one row of the report.

@@ -2,7 +2,8 @@
 //! service's worker, a benchmark). [`env`] makes a run's environments from a world and a
 //! job's settings; [`train`] runs a training job one iteration at a time with checkpoints and
 //! their lineage; [`eval`] evaluates a checkpoint over tasks (the paper's Table I); [`demos`]
-//! and [`anchors`] make behaviour cloning's rows from the scripted oracle and a policy;
+//! and [`anchors`] make behaviour cloning's rows from the scripted oracle and a policy, and
+//! [`imitation`] runs a job's cloning stage with them;
 //! [`topology`] is the grasp-topology network's picks; [`record`] is how a job's episodes are
 //! recorded, behind traits (rerun lives in the binary). Nothing here parses a command line or
 //! talks to the network.
@@ -13,6 +14,7 @@ pub mod demos;
 pub mod env;
 pub mod error;
 pub mod eval;
+pub mod imitation;
 pub mod record;
 pub mod topology;
 pub mod train;

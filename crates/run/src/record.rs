@@ -14,7 +14,21 @@ use crm::{EnvStep, Environment, Machine, StageId};
 use crm_api::Iteration;
 use grasp_sim::GraspEnv;
 
-use crate::eval::EpisodeRecord;
+/// One finished episode, with the machine's transition history: what an evaluation reports
+/// of each episode and a training job of each recorded one.
+#[derive(Clone, Debug)]
+pub struct EpisodeRecord {
+    pub task: String,
+    pub success: bool,
+    /// How it ended (`success`, `failure (dropped)`, ...: [`grasp_sim::events::outcome_label`]).
+    pub outcome: String,
+    /// Simulated seconds, the arm's execution included.
+    pub sim_seconds: f64,
+    pub length: usize,
+    pub total_return: f64,
+    /// (step, from stage, to stage, event, transition reward).
+    pub transitions: Vec<(usize, String, String, String, f32)>,
+}
 
 /// Watches a job's episodes and its training series.
 pub trait Recorder: Send {

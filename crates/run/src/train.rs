@@ -30,6 +30,10 @@ fn file_sha256(path: &Path) -> Result<String> {
         .collect())
 }
 
+/// A policy's actions at a batch of abstract states in their stages: the ones it executes
+/// (sampled) and its means (the labels).
+pub type PolicyActions = (Vec<Vec<f32>>, Vec<Vec<f32>>);
+
 /// The learner of a run.
 enum Learner {
     Ppo(Box<Ppo>),
@@ -284,7 +288,7 @@ impl Trainer {
         &mut self,
         states: &[Vec<f32>],
         stages: &[usize],
-    ) -> Result<crate::anchors::PolicyActions> {
+    ) -> Result<PolicyActions> {
         let Learner::Ppo(ppo) = &mut self.learner else {
             return Err(invalid!("behaviour cloning is for the PPO learners"));
         };

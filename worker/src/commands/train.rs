@@ -11,7 +11,7 @@ use crm_learn::PpoConfig;
 use super::{EnvArgs, read_json};
 use crm_api::{Algorithm, ImitationSpec, SacConfig, TrainSpec};
 use crm_run::Trainer;
-use crm_run::demos;
+use crm_run::imitation;
 
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
@@ -136,7 +136,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let mut trainer = Trainer::new(spec.clone(), args.env.env(), init, None)?;
     trainer.set_command(std::env::args().collect());
     let bar = indicatif::ProgressBar::new(0);
-    demos::imitate(
+    imitation::imitate(
         &spec,
         args.env.env(),
         &mut trainer,

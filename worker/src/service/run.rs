@@ -17,8 +17,8 @@ use super::{Client, WorkerOptions};
 use crate::record::{Recorder, SharedRecorder, lock};
 use crm_run::Env;
 use crm_run::Trainer;
-use crm_run::demos;
 use crm_run::eval::{EpisodeRecord, evaluate};
+use crm_run::imitation;
 
 /// A scratch folder removed on drop.
 struct Scratch(PathBuf);
@@ -198,7 +198,7 @@ fn train(
         // The phases report at most once a second (and when one ends), as evaluations do.
         let mut last: Option<Instant> = None;
         let mut sent = Ok(());
-        let finished = demos::imitate(
+        let finished = imitation::imitate(
             &spec,
             &env,
             &mut trainer,
