@@ -1,8 +1,8 @@
 //! Demonstrations for behaviour cloning from the scripted controller (`grasp_sim::oracle`, with
 //! privileged state), through the grasping machine, as (abstract state, stage, action, mask)
-//! rows for `Ppo::imitate`, and a training job's imitation stage ([`imitate`]). The oracle's
-//! executed actions may carry noise while its labels stay clean (DART, Laskey et al., 2017),
-//! so the clone also sees how the oracle recovers from small mistakes.
+//! rows for `Ppo::imitate` (a training job's imitation stage, [`crate::imitation`], runs it).
+//! The oracle's executed actions may carry noise while its labels stay clean (DART, Laskey et
+//! al., 2017), so the clone also sees how the oracle recovers from small mistakes.
 
 use std::sync::Arc;
 
@@ -11,8 +11,8 @@ use grasp_sim::oracle::Oracle;
 use grasp_sim::{Benchmark, SimConfig};
 use rayon::prelude::*;
 
-use crate::error::{Result, invalid};
 use crate::EnvChoice;
+use crate::error::{Result, invalid};
 
 /// Where demonstrations come from: the environments, the first seed and the noise on the
 /// oracle's executed actions.
