@@ -2,7 +2,7 @@
 //! demonstrations ([`crate::demos`]), anchor states of the starting policy
 //! ([`crate::anchors`]), then behaviour cloning into the trainer's policy.
 
-use crm_api::{ImitationSpec, TrainSpec};
+use crm_api::TrainSpec;
 
 use crate::demos::{DemoSource, oracle_demos_with, shifts_by_task};
 use crate::error::{Result, invalid};
@@ -29,11 +29,8 @@ pub fn imitate(
     let Some(imitation) = &spec.imitation else {
         return Ok(true);
     };
-    if !ImitationSpec::supports(spec.algorithm) {
-        return Err(invalid!(
-            "imitation: behaviour cloning is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo)"
-        ));
-    }
+    // Which learners clone, and the imitation's own ranges: the document's rules.
+    spec.validate().map_err(|err| invalid!("{err}"))?;
     let started = std::time::Instant::now();
     let benchmark = env.benchmark()?;
     let machine = env.machine()?;

@@ -109,10 +109,8 @@ impl Trainer {
             _ => env.machine()?,
         };
         let choice = crate::EnvChoice::of(&benchmark, &spec.task, &spec.tasks, &spec.topology)?;
+        // At least 1: `validate` refuses `envs: 0`, and rayon has a thread.
         let env_count = spec.envs.unwrap_or_else(rayon::current_num_threads);
-        if env_count == 0 {
-            return Err(invalid!("envs must be at least 1"));
-        }
         let spec_hash = machine.spec().hash();
         let layout = Layout::of(&machine);
         let is_sac = spec.algorithm == Algorithm::CrmSac;

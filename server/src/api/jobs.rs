@@ -223,12 +223,7 @@ async fn check_fine_tune(state: &AppState, spec: &TrainSpec) -> Result<(), ApiEr
     let Some(id) = spec.fine_tune else {
         return Ok(());
     };
-    if id <= 0 {
-        return Err(ApiError::invalid(
-            "fine_tune",
-            "must be a checkpoint's id (a positive integer)",
-        ));
-    }
+    // A positive id: `TrainSpec::validate` ran first.
     let checkpoint = stored_checkpoint(state, "fine_tune", id).await?;
     if checkpoint.algorithm != spec.algorithm.name() {
         return Err(ApiError::conflict_with(

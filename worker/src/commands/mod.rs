@@ -24,7 +24,7 @@ use std::io::Write;
 use anyhow::Context;
 use crm_api::ObjectiveMode;
 use crm_run::{Env, EnvSpec};
-use grasp_sim::{Benchmark, EnvSettings};
+use grasp_sim::EnvSettings;
 
 /// Options every environment-running command shares: a [`crm_run::EnvSpec`] on the command
 /// line.
@@ -131,11 +131,6 @@ pub fn read_json<T: serde::de::DeserializeOwned + Default>(
         }
         None => Ok(T::default()),
     }
-}
-
-/// The index of a task by id, or a message naming the flag and pointing at `crm tasks`.
-pub fn task_index(benchmark: &Benchmark, id: &str) -> anyhow::Result<usize> {
-    Ok(crm_run::choice::task_index(benchmark, id)?)
 }
 
 /// Writes to standard output; a closed pipe (`crm tasks | head`) ends the output quietly.

@@ -90,8 +90,8 @@ pub fn run(args: OracleArgs) -> anyhow::Result<()> {
     } else {
         args.tasks
             .iter()
-            .map(|id| super::task_index(&benchmark, id))
-            .collect::<anyhow::Result<_>>()?
+            .map(|id| crm_run::choice::task_index(&benchmark, id))
+            .collect::<crm_run::Result<_>>()?
     };
     let shifts = crm_run::demos::shifts_by_task(&benchmark, &args.shifts.iter().cloned().collect())
         .map_err(|e| anyhow::anyhow!("--shift: {e:#}"))?;

@@ -65,7 +65,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     let benchmark = args.env.env().benchmark()?;
-    let task = super::task_index(&benchmark, &args.task)?;
+    let task = crm_run::choice::task_index(&benchmark, &args.task)?;
     let machine = args.env.env().machine()?;
     let mut grasp = GraspEnv::new(benchmark, args.env.env().config()?);
     grasp.set_task_choice(grasp_sim::TaskChoice::Fixed(task))?;
