@@ -170,7 +170,7 @@ impl Tokens {
         // Compare against every token, whatever matched first, so timing tells nothing.
         let is = |t: &Option<String>| {
             t.as_deref()
-                .is_some_and(|t| crate::api::constant_time_eq(given.as_bytes(), t.as_bytes()))
+                .is_some_and(|t| crate::secrets::constant_time_eq(given.as_bytes(), t.as_bytes()))
         };
         let (all, read, submit, worker) = (
             is(&self.all),

@@ -9,6 +9,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::lineage::LineageStage;
 use crate::network::{ActorCritic, Layout};
 use crate::normalize::ObsNorm;
 
@@ -52,7 +53,7 @@ pub struct CheckpointHeader {
     /// How it was made: every training run that led to it, oldest first, this one last
     /// (see `lineage.rs`). Empty in checkpoints written before headers kept it.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub lineage: Vec<crate::lineage::LineageStage>,
+    pub lineage: Vec<LineageStage>,
 }
 
 /// What CRM-SAC checkpoints say in `activation` (older ones, with `tanh`, say nothing).
@@ -302,6 +303,29 @@ impl Checkpoint {
         let tensors = Self::fill(&bytes, path, &nets.params)?;
         nets.set_norm(Self::norm_of(&tensors, header.layout, path)?)?;
         Ok((nets, header))
+    }
+}
+
+impl LineageStage {
+    /// The lineage a child of the checkpoint with header `parent` starts from: the parent's
+    /// own, or, for a parent written without one, a stage made from what its header says.
+    pub fn inherited(parent: &CheckpointHeader) -> Vec<LineageStage> {
+        if !parent.lineage.is_empty() {
+            return parent.lineage.clone();
+        }
+        vec![LineageStage {
+            kind: "unrecorded".into(),
+            algorithm: parent.algorithm.clone(),
+            steps: parent.steps,
+            wall_s: 0.0,
+            seed: parent.seed,
+            parent_sha256: None,
+            world: parent.world.clone(),
+            world_hash: parent.world_hash.clone(),
+            imitation: None,
+            command: None,
+            job: serde_json::json!({ "config": parent.config }),
+        }]
     }
 }
 

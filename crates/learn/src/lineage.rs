@@ -5,8 +5,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::CheckpointHeader;
-
 /// One training run in a checkpoint's making.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LineageStage {
@@ -38,29 +36,6 @@ pub struct LineageStage {
     /// The training job's whole specification (a `TrainSpec` as JSON).
     #[serde(default, skip_serializing_if = "serde_json::Value::is_null")]
     pub job: serde_json::Value,
-}
-
-impl LineageStage {
-    /// The lineage a child of the checkpoint with header `parent` starts from: the parent's
-    /// own, or, for a parent written without one, a stage made from what its header says.
-    pub fn inherited(parent: &CheckpointHeader) -> Vec<LineageStage> {
-        if !parent.lineage.is_empty() {
-            return parent.lineage.clone();
-        }
-        vec![LineageStage {
-            kind: "unrecorded".into(),
-            algorithm: parent.algorithm.clone(),
-            steps: parent.steps,
-            wall_s: 0.0,
-            seed: parent.seed,
-            parent_sha256: None,
-            world: parent.world.clone(),
-            world_hash: parent.world_hash.clone(),
-            imitation: None,
-            command: None,
-            job: serde_json::json!({ "config": parent.config }),
-        }]
-    }
 }
 
 /// The lineage as text, one stage a paragraph (`crm checkpoint show`).

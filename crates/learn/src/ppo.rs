@@ -16,7 +16,7 @@ use std::time::Instant;
 use candle_core::Tensor;
 
 use crate::error::{Error, Result};
-use crate::fused::{self, Coefs, Columns, Engine};
+use crate::fused::{self, Coefs, Columns, Engine, kl_and_clipfrac};
 use crate::gae::{StepRecord, gae, normalize};
 use crate::network::{ActorCritic, Layout};
 use crate::noise::Noise;
@@ -421,19 +421,6 @@ impl Ppo {
         stats.timing.bookkeeping += read.elapsed().as_secs_f64();
         Ok(approx_kl)
     }
-}
-
-/// A minibatch's approximate KL, `mean((ratio - 1) - log ratio)`, and the fraction of its
-/// ratios outside `1 +- clip`, from its log ratios on the host (CleanRL's two statistics).
-pub(crate) fn kl_and_clipfrac(log_ratio: &[f32], clip: f32) -> (f32, f32) {
-    let count = log_ratio.len().max(1) as f32;
-    let approx_kl = log_ratio.iter().map(|&l| (l.exp() - 1.0) - l).sum::<f32>() / count;
-    let clipfrac = log_ratio
-        .iter()
-        .filter(|&&l| (l.exp() - 1.0).abs() > clip)
-        .count() as f32
-        / count;
-    (approx_kl, clipfrac)
 }
 
 /// A minibatch's PPO loss as candle tensors (the reference path), with its parts.

@@ -17,8 +17,8 @@
 use std::path::Path;
 
 use anyhow::{Context, bail};
+use grasp_sim::env::script::GRASP_SCALE;
 use grasp_sim::oracle::Oracle;
-use grasp_sim::script::GRASP_SCALE;
 use grasp_sim::{GraspEnv, SimConfig, TaskChoice, World};
 
 fn number(text: &str, name: &str) -> anyhow::Result<f32> {

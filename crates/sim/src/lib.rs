@@ -35,11 +35,11 @@ pub mod observation;
 pub mod oracle;
 pub mod ready;
 pub mod scene;
-pub mod script;
 pub mod setup;
 pub mod spec;
 mod staging;
 pub mod stiction;
+pub mod taxonomy;
 pub mod view;
 pub mod world;
 

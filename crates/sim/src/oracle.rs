@@ -2,7 +2,7 @@
 //! can grasp. It moves to the task's grasp location along the hand's approach axis (from
 //! above for a palm that faces down), closes to the topology's shape while regulating the
 //! grip under the object's force limit, then performs the objective with the arm's
-//! controllers of `script.rs`. An oracle given a palm shift ([`Oracle::with_shift`]) first
+//! controllers of `env/script.rs`. An oracle given a palm shift ([`Oracle::with_shift`]) first
 //! moves the palm that far from the grasp location in the grasp stage, for a task whose
 //! grasp holds only off the point it arrives at (docs/WORLDS.md, "The handle bottle of
 //! `t07`"). Under the paper's protocol the
@@ -13,8 +13,8 @@ use rapier3d::math::Vec3;
 
 use crate::benchmark::Objective;
 use crate::env::GraspEnv;
+use crate::env::script::GRASP_SCALE;
 use crate::observation::ACTIONS;
-use crate::script::GRASP_SCALE;
 
 /// Approach step scale of the grasping spec (m per unit action).
 const APPROACH_SCALE: f32 = 0.01;
@@ -116,7 +116,7 @@ impl Oracle {
         let shape = env.hand_shape();
         let limit = object.fragility.grasp_force_limit();
         let grip = parts.grip * limit;
-        let wanted_grip = crate::script::wanted_grip(env);
+        let wanted_grip = crate::env::script::wanted_grip(env);
         match self.phase {
             Phase::Align => {
                 // `rel` is the grasp location minus the palm: the palm heads for the grasp
@@ -164,7 +164,7 @@ impl Oracle {
                     self.enter(Phase::Act);
                 }
             }
-            Phase::Act => return crate::script::objective_action(env, wanted_grip),
+            Phase::Act => return crate::env::script::objective_action(env, wanted_grip),
         }
         action
     }

@@ -7,9 +7,9 @@ use std::sync::Arc;
 use rapier3d::prelude::Vec3;
 
 use grasp_sim::benchmark::Fragility;
+use grasp_sim::env::script::{objective_action, wanted_grip};
 use grasp_sim::events::FailCause;
 use grasp_sim::oracle::{Oracle, run_episode};
-use grasp_sim::script::{objective_action, wanted_grip};
 use grasp_sim::spec::grasping_machine;
 use grasp_sim::{Benchmark, GraspEnv, Protocol, SimConfig, TaskChoice};
 

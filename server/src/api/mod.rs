@@ -231,8 +231,3 @@ async fn require_token(
         Verdict::Forbidden => ApiError::forbidden(scope).into_response(),
     }
 }
-
-/// Whether two secrets are equal, in a time that depends on their lengths only.
-pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
-}

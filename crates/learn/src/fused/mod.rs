@@ -23,7 +23,6 @@ use candle_core::Tensor;
 use crate::error::{Error, Result};
 use crate::network::ActorCritic;
 use crate::optim::{Adam, AdamStep, clip_scale, is_critic};
-use crate::ppo::kl_and_clipfrac;
 use heads::{PolicyLoss, policy_head, value_head};
 use mlp::{Layer, Mlp, Param};
 
@@ -371,4 +370,17 @@ fn step_group(net: &mut Mlp, extra: Option<&mut Param>, max_norm: f32, adam: Ada
         adam.apply(value, grad, scale, m, v);
     }
     started.elapsed().as_secs_f64()
+}
+
+/// A minibatch's approximate KL, `mean((ratio - 1) - log ratio)`, and the fraction of its
+/// ratios outside `1 +- clip`, from its log ratios on the host (CleanRL's two statistics).
+pub(crate) fn kl_and_clipfrac(log_ratio: &[f32], clip: f32) -> (f32, f32) {
+    let count = log_ratio.len().max(1) as f32;
+    let approx_kl = log_ratio.iter().map(|&l| (l.exp() - 1.0) - l).sum::<f32>() / count;
+    let clipfrac = log_ratio
+        .iter()
+        .filter(|&&l| (l.exp() - 1.0).abs() > clip)
+        .count() as f32
+        / count;
+    (approx_kl, clipfrac)
 }

@@ -4,7 +4,6 @@
 pub mod mesh;
 mod object;
 mod task;
-mod taxonomy;
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -12,9 +11,9 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::taxonomy::{FINGERS, FingerShape, Fragility, Objective, Topology};
 pub use object::{Anchor, Axis, OBJECT_FEATURES, Object, ObjectFlags, Part, Shape};
 pub use task::{GraspLocation, Task};
-pub use taxonomy::{FINGERS, FingerShape, Fragility, Objective, Topology};
 
 use crate::assets::Assets;
 use crate::error::{Error, Result, parse_json, read_text};

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mesh::{Decomposition, MeshGeometry};
-use super::taxonomy::Fragility;
+use crate::taxonomy::Fragility;
 use std::sync::Arc;
 
 /// The axis of a cylinder or capsule part, in the object frame.

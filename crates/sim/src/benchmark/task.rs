@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::taxonomy::{Objective, Topology};
+use crate::taxonomy::{Objective, Topology};
 
 /// Where the hand goes: its grasp point (the profile's `grasp_point`) at `offset` in the
 /// object frame, with the hand turned by `yaw` (radians) about the vertical from the object's

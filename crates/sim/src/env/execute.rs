@@ -9,12 +9,12 @@
 use rapier3d::prelude::Vec3;
 
 use super::GraspEnv;
+use super::script::{FINGER_SCALE, GRASP_SCALE, objective_action};
 use crate::benchmark::{Objective, Topology};
 use crate::config::Protocol;
 use crate::error::Result;
 use crate::events::FailCause;
 use crate::ready::{ReadyTest, touch};
-use crate::script::{FINGER_SCALE, GRASP_SCALE, objective_action};
 
 /// Longest execution (simulated s) of a twist or a press: both are decided within a second
 /// when the grasp turns or presses the object at all.

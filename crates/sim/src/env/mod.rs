@@ -16,6 +16,7 @@ use crate::observation::{ACTIONS, MAX_FINGER_STEP, MAX_PALM_STEP, ObservationPar
 use crate::scene::{self, Scene};
 
 mod execute;
+pub mod script;
 
 /// Which task an episode runs.
 #[derive(Clone, Debug, PartialEq, Eq)]

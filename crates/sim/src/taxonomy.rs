@@ -1,5 +1,6 @@
 //! The benchmark's vocabularies: the 7 task objectives, the 6 grasp topologies of the
 //! paper's Fig. 2 (section II-B) and the fragility classes with their grasp-force limits.
+//! Hands and benchmarks both speak it; neither imports the other for it.
 
 use serde::{Deserialize, Serialize};
 

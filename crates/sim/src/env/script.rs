@@ -9,8 +9,8 @@
 
 use rapier3d::prelude::Vec3;
 
+use super::GraspEnv;
 use crate::benchmark::Objective;
-use crate::env::GraspEnv;
 use crate::observation::ACTIONS;
 
 /// Step scales of the grasping spec's grasp stage: palm metres and finger radians per unit
