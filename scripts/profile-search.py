@@ -3,13 +3,15 @@
 
 usage: scripts/profile-search.py WORLD OUT.jsonl --seconds S [--workers N] [--seeds K]
                                  [--held JOINT=LO:HI ...] [--box X0:X1,Y0:Y1,Z0:Z1]
-                                 [--torques T,T,...]
+                                 [--torques T,T,...] [--topology NAME]
 
 For each sample it writes a copy of WORLD's `hand.json` with the grasp point drawn from
 `--box` (palm frame, m), each `--held` joint drawn from its range, the motors' torque from
 `--torques` (default {0.2, 0.35, 0.5, 0.7} N m) and every topology's closed commands at 60%, 80% or 100% of each
 finger's range, runs `crm oracle --world COPY --json --seeds K`, and appends the sample and its
-success to OUT.jsonl (one JSON line each). The best line is a profile to try with more seeds.
+success to OUT.jsonl (one JSON line each). With `--topology NAME` the sample is that topology's
+own (its `grasp_point`, `held` and `closed`; the torque stays the profile's) and the oracle runs
+that topology's tasks only. The best line is a profile to try with more seeds.
 `crm` is the release build (`CARGO_TARGET_DIR`, else `target/`); the description is found as
 the world finds it (`CRM_ASSETS`). docs/WORLDS.md, "Bring your hand", has the Allegro search.
 """
@@ -59,14 +61,29 @@ def profile(base, world_dir, p):
     description = hand["description"]
     if not os.path.isabs(description) and os.path.exists(os.path.join(world_dir, description)):
         hand["description"] = os.path.join(world_dir, description)
-    hand["grasp_point"] = p["grasp_point"]
-    hand["held"] = {**hand.get("held", {}), **p["held"]}
-    hand["motor"]["torque"] = p["torque"]
-    for topology in hand["topologies"].values():
+    if p.get("topology"):
+        shape = hand["topologies"][p["topology"]]
+        shape["grasp_point"] = p["grasp_point"]
+        shape["held"] = {**shape.get("held", {}), **p["held"]}
+        shapes = [shape]
+    else:
+        hand["grasp_point"] = p["grasp_point"]
+        hand["held"] = {**hand.get("held", {}), **p["held"]}
+        hand["motor"]["torque"] = p["torque"]
+        shapes = hand["topologies"].values()
+    for topology in shapes:
         for finger in list(topology.get("closed", {})):
             lo, hi = hand["fingers"][finger]["range"]
             topology["closed"][finger] = round(lo + p["close"] * (hi - lo) * 0.999, 3)
     return hand
+
+
+def benchmark_tasks(world_dir, world):
+    """The world's tasks: its own benchmark file, or the built-in one."""
+    path = os.path.join(world_dir, world.get("benchmark", ""))
+    if not world.get("benchmark"):
+        path = os.path.join(ROOT, "worlds", "crm", "benchmark.json")
+    return json.load(open(path))["tasks"]
 
 
 def run(job):
@@ -75,6 +92,11 @@ def run(job):
     world = json.load(open(os.path.join(world_dir, "world.json")))
     base = json.load(open(os.path.join(world_dir, world["hand"])))
     p = sample(random.Random(index), args)
+    tasks = []
+    if args.topology:
+        p["topology"] = args.topology
+        p.pop("torque")
+        tasks = [t["id"] for t in benchmark_tasks(world_dir, world) if t["topology"] == args.topology]
     with tempfile.TemporaryDirectory() as scratch:
         for name in os.listdir(world_dir):
             if name != world["hand"]:
@@ -83,7 +105,8 @@ def run(job):
                     shutil.copy(source, scratch)
         json.dump(profile(base, world_dir, p), open(os.path.join(scratch, world["hand"]), "w"))
         done = subprocess.run(
-            [crm_binary(), "oracle", "--world", scratch, "--json", "--seeds", str(args.seeds)],
+            [crm_binary(), "oracle", "--world", scratch, "--json", "--seeds", str(args.seeds)]
+            + [arg for task in tasks for arg in ("--task", task)],
             capture_output=True, text=True, timeout=1800)
     if done.returncode != 0:
         return {"sample": index, "params": p, "error": done.stderr.strip()[-400:]}
@@ -103,6 +126,7 @@ def main():
     parser.add_argument("--box", default="0.0:0.1,-0.03:0.03,-0.1:0.03")
     parser.add_argument("--held", action="append", default=[], metavar="JOINT=LO:HI")
     parser.add_argument("--torques", default="0.2,0.35,0.5,0.7", help="motor torques to draw (N m)")
+    parser.add_argument("--topology", help="search this topology's own grasp point, held joints and closing")
     args = parser.parse_args()
     try:
         args.torques = [float(t) for t in args.torques.split(",")]
@@ -116,6 +140,13 @@ def main():
         span(rng, "--held")
         held.append((joint, rng))
     args.held = held
+    if args.topology:
+        world = json.load(open(os.path.join(args.world, "world.json")))
+        hand = json.load(open(os.path.join(args.world, world["hand"])))
+        if args.topology not in hand["topologies"]:
+            raise SystemExit(f"--topology: {args.topology!r} is not one of {sorted(hand['topologies'])}")
+        if not any(t["topology"] == args.topology for t in benchmark_tasks(args.world, world)):
+            raise SystemExit(f"--topology: the world has no task with topology {args.topology!r}")
     start = time.time()
     with multiprocessing.Pool(args.workers) as pool, open(args.out, "w") as out:
         jobs = ((i, args) for i in range(args.first, args.first + 10**6))

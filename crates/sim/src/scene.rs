@@ -186,7 +186,7 @@ pub fn build(
     };
     let hand_rotation = object_start.rotation * grasp_rotation;
     let grasp_location = object_start.transform_point(Vec3::from(task.grasp.offset));
-    let grasp_point = hand_rotation * hand.grasp_point;
+    let grasp_point = hand_rotation * hand.grasp_point_of(task.topology);
     let mount_start =
         grasp_location + Vec3::from(task.start.unwrap_or(config.hand_start)) - grasp_point;
     let joint_offsets = hand

@@ -40,8 +40,8 @@ pub fn model() -> Arc<HandModel> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::benchmark::Topology;
     use crate::hand::coupled_angles;
+    use crate::taxonomy::Topology;
 
     #[test]
     fn the_builtin_hand_loads_with_the_papers_coupling() {

@@ -383,7 +383,7 @@ fn shapes_of(colliders: &[Collider]) -> Vec<(Pose, SharedShape)> {
             // A collider not yet attached to a body keeps its local pose as its position.
             (
                 c.position_wrt_parent().copied().unwrap_or(*c.position()),
-                c.shared_shape().clone(),
+                super::hulls::affordable(c.shared_shape()),
             )
         })
         .collect()

@@ -20,7 +20,7 @@ use rapier3d::prelude::*;
 
 use super::description::{Description, JointKind};
 use super::profile::{Coupled, Finger, Fingers, Motor, Profile, Ratio, TopologyShape, Wrist};
-use crate::benchmark::Topology;
+use crate::taxonomy::Topology;
 
 /// A drafted profile and what the user must confirm.
 #[derive(Clone, Debug)]
@@ -388,6 +388,7 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
             })
             .collect(),
         held: BTreeMap::new(),
+        grasp_point: None,
     };
     let mut topologies = BTreeMap::new();
     topologies.insert(Topology::Platform, TopologyShape::default());

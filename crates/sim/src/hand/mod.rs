@@ -12,6 +12,7 @@ pub mod builtin;
 pub mod description;
 pub mod draft;
 mod finger;
+mod hulls;
 pub(crate) mod includes;
 mod meshes;
 pub mod model;
@@ -27,7 +28,7 @@ use description::JointKind;
 
 pub use model::HandModel;
 
-use crate::benchmark::Topology;
+use crate::taxonomy::Topology;
 
 /// `alpha_DIP` for index, middle, ring, little (paper, section IV-B).
 pub const ALPHA_DIP: [f32; 4] = [0.77, 0.75, 0.75, 0.57];
@@ -84,6 +85,8 @@ pub struct Hand {
     /// How far (m) the hand, as built, reaches ahead of its grasp point along its approach
     /// axis (a thumb or a palm that stands out in front of the grasp point).
     pub reach: f32,
+    /// The point (palm frame) brought to the task's grasp location: the topology's.
+    pub grasp_point: Vec3,
     pub model: Arc<HandModel>,
 }
 
@@ -269,6 +272,7 @@ impl Hand {
         let palm_links = model.palm_links.iter().map(|&l| bodies[l]).collect();
         let to_palm = pose.inverse();
         let axis = model.approach_axis;
+        let grasp_point = model.grasp_point_of(topology);
         let mut reach = 0.0f32;
         for body in bodies.iter().filter_map(|&b| world.bodies.get(b)) {
             for collider in body
@@ -282,7 +286,7 @@ impl Hand {
                 let ahead: f32 = (0..3)
                     .map(|i| (aabb.mins[i] * axis[i]).max(aabb.maxs[i] * axis[i]))
                     .sum();
-                reach = reach.max(ahead - model.grasp_point.dot(axis));
+                reach = reach.max(ahead - grasp_point.dot(axis));
             }
         }
         Self {
@@ -296,6 +300,7 @@ impl Hand {
             joint_offsets,
             commands,
             reach,
+            grasp_point,
             model: model.clone(),
         }
     }
@@ -364,10 +369,9 @@ impl Hand {
             .unwrap_or_default()
     }
 
-    /// The grasp point of the hand in the world.
+    /// The grasp point of the hand (its topology's) in the world.
     pub fn grasp_point(&self, world: &PhysicsWorld) -> Vec3 {
-        self.palm_pose(world)
-            .transform_point(self.model.grasp_point)
+        self.palm_pose(world).transform_point(self.grasp_point)
     }
 
     /// Which finger (thumb first) and link (proximal first) `body` is, if it is a finger link.

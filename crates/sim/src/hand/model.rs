@@ -11,8 +11,8 @@ pub use super::finger::FingerModel;
 use super::finger::{beyond_limits, finger_model};
 use super::names::did_you_mean;
 use super::profile::{Motor, Profile, Wrist};
-use crate::benchmark::{FINGERS, FingerShape, Topology};
 use crate::error::{Error, Result};
+use crate::taxonomy::{FINGERS, FingerShape, Topology};
 
 /// A link of the hand: its pose at rest in the palm frame, shapes and mass.
 #[derive(Clone, Debug)]
@@ -53,7 +53,11 @@ pub struct HandModel {
     pub fingers: [FingerModel; 5],
     /// Links whose contacts count as the palm's (the palm first).
     pub palm_links: Vec<usize>,
+    /// The point (palm frame) a task's grasp location is for, unless the topology has its own
+    /// ([`HandModel::grasp_point_of`]).
     pub grasp_point: Vec3,
+    /// Topologies' own grasp points (palm frame).
+    topology_grasp_points: BTreeMap<Topology, Vec3>,
     /// The palm's orientation in the world at a task's zero yaw.
     pub base_rotation: Rotation,
     /// The frame a task's grasp orientation places, in the palm frame (profile `grasp_frame`).
@@ -299,6 +303,7 @@ impl HandModel {
         };
         let mut shapes = BTreeMap::new();
         let mut held = BTreeMap::new();
+        let mut topology_grasp_points = BTreeMap::new();
         for topology in Topology::ALL {
             let at = format!("topologies.{}", topology.name());
             let Some(shape) = profile.topologies.get(&topology) else {
@@ -311,6 +316,15 @@ impl HandModel {
             }; 5];
             for name in &shape.active {
                 fingers_shape[finger_index(name, &format!("{at}.active"))?].active = true;
+            }
+            if let Some(point) = shape.grasp_point {
+                if !finite(&point) {
+                    return Err(invalid(
+                        format!("{at}.grasp_point"),
+                        "must be finite".into(),
+                    ));
+                }
+                topology_grasp_points.insert(topology, Vec3::from(point));
             }
             for (field, values) in [("preshape", &shape.preshape), ("closed", &shape.closed)] {
                 for (name, &value) in values {
@@ -405,6 +419,7 @@ impl HandModel {
             fingers,
             palm_links,
             grasp_point: Vec3::from(profile.grasp_point),
+            topology_grasp_points,
             base_rotation,
             grasp_frame,
             approach_axis: approach,
@@ -426,6 +441,14 @@ impl HandModel {
                 closed: 0.0,
             }; 5],
         )
+    }
+
+    /// The point (palm frame) that `topology` brings to a task's grasp location.
+    pub fn grasp_point_of(&self, topology: Topology) -> Vec3 {
+        self.topology_grasp_points
+            .get(&topology)
+            .copied()
+            .unwrap_or(self.grasp_point)
     }
 
     /// The joints held still in `topology` and their angles.

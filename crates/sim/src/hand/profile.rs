@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::benchmark::Topology;
+use crate::taxonomy::Topology;
 
 /// A hand profile as written in `hand.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -174,7 +174,7 @@ pub enum Ratio {
 }
 
 /// A topology's hand shape: which fingers it uses, their commands before closing (preshape),
-/// how far the scripted oracle closes them, and held joints of its own.
+/// how far the scripted oracle closes them, held joints and a grasp point of its own.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TopologyShape {
@@ -190,4 +190,9 @@ pub struct TopologyShape {
     /// Held joint angles in this topology (over the profile's `held`).
     #[serde(default)]
     pub held: BTreeMap<String, f32>,
+    /// The point (palm frame, m) this topology brings to the task's grasp location, where it
+    /// is not the profile's `grasp_point`: a palm press wants the palm's face where a pinch
+    /// wants the fingertips' meeting point.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grasp_point: Option<[f32; 3]>,
 }

@@ -207,6 +207,7 @@ pub fn profile(description: &Description) -> Result<Profile, String> {
                 preshape: by_name(preshape),
                 closed: by_name(closed),
                 held: BTreeMap::from([(OPPOSITION.into(), opposition)]),
+                grasp_point: None,
             },
         );
     }
