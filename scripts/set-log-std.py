@@ -2,7 +2,7 @@
 """A copy of a PPO checkpoint with its policy's log standard deviations set by hand: how the
 rows "nothing trained" of docs/WORLDS.md ("Sampled actions") were made, to evaluate one
 network's sampled actions at another noise (`crm eval` on the copy; the mean action is the
-same). To train on from a noise, use `crm train --fine-tune FILE --start-log-std V` instead.
+same). To train on from a noise, use `crm train --fine-tune FILE --init-log-std V` instead.
 
 Usage: python3 scripts/set-log-std.py IN.safetensors OUT.safetensors VALUE [--from INDEX]
 (needs numpy). VALUE goes to every action from INDEX on (default 0: all; the grasping machine's

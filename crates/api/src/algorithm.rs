@@ -44,7 +44,7 @@ impl Algorithm {
 
     /// Whether this is a PPO learner of the grasping machine (crm-ppo, ippo, lppo): one
     /// Gaussian policy over the machine's stages, what behaviour cloning
-    /// ([`crate::ImitationSpec::supports`]) and `start_log_std` act on.
+    /// ([`crate::ImitationSpec::supports`]) acts on.
     pub fn is_machine_ppo(self) -> bool {
         matches!(self, Algorithm::CrmPpo | Algorithm::Ippo | Algorithm::Lppo)
     }

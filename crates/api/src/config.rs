@@ -51,8 +51,13 @@ pub struct PpoConfig {
     /// exceeds 1.5 x this (stable-baselines3's `target_kl` rule); 0 turns it off. 0.02, our
     /// value (SB3 leaves the guard off by default).
     pub target_kl: f64,
-    /// Initial log standard deviation of the policy. CleanRL's continuous PPO: 0.
-    pub init_log_std: f64,
+    /// Every log standard deviation of the policy at the run's start, the one noise knob:
+    /// absent, fresh weights start at [`DEFAULT_LOG_STD`] and a fine-tune keeps the
+    /// checkpoint's own; a resumed run always keeps its own. PPO learns it on from there. A
+    /// narrower noise on a fine-tune keeps sampled actions on grasps that the learned noise
+    /// breaks (docs/notebook/worlds.md, "Sampled actions").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub init_log_std: Option<f64>,
     /// Running observation normalization (SB3 `VecNormalize`, which the authors used).
     pub norm_obs: bool,
     /// Reward scaling by the running std of the discounted return (SB3 `VecNormalize`), one
@@ -94,7 +99,7 @@ impl Default for PpoConfig {
             early_stop_success: 0.99,
             early_stop_window: 100,
             target_kl: 0.02,
-            init_log_std: 0.0,
+            init_log_std: None,
             norm_obs: true,
             norm_reward: true,
             lr_schedule: LrSchedule::Paper,
@@ -145,7 +150,7 @@ impl PpoConfig {
         if !(0.0..=1000.0).contains(&self.target_kl) {
             return bad("target_kl", "must be in [0, 1000] (0 turns the guard off)");
         }
-        if !in_log_std_range(self.init_log_std) {
+        if self.init_log_std.is_some_and(|v| !in_log_std_range(v)) {
             let (low, high) = LOG_STD_RANGE;
             return bad("init_log_std", &format!("must be in [{low}, {high}]"));
         }
@@ -167,8 +172,12 @@ pub const MAX_WINDOW: usize = 10_000_000;
 /// Largest SAC replay buffer, in transitions (SB3's default is 1,000,000).
 pub const MAX_BUFFER: usize = 10_000_000;
 
-/// Lowest and highest log standard deviation a policy may start a run with: `init_log_std`,
-/// and a job's `start_log_std` (`crate::jobs::check_start_log_std`).
+/// A fresh policy's log standard deviation where `init_log_std` is absent: CleanRL's
+/// continuous PPO and Stable-Baselines3's `log_std_init`, 0.
+pub const DEFAULT_LOG_STD: f64 = 0.0;
+
+/// Lowest and highest log standard deviation a policy may start a run with (`init_log_std`,
+/// and a job's `start_log_std`, its older name).
 pub const LOG_STD_RANGE: (f64, f64) = (-5.0, 2.0);
 
 /// Whether `value` is a finite log standard deviation within [`LOG_STD_RANGE`].

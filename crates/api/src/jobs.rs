@@ -89,12 +89,9 @@ pub struct TrainSpec {
     /// layout), counting steps from 0, as `crm train --fine-tune` does; absent: fresh weights.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fine_tune: Option<i64>,
-    /// Every log standard deviation of the policy at the run's start: it replaces
-    /// `config.init_log_std` on fresh weights and the checkpoint's own with `fine_tune`; a
-    /// resumed run keeps its own. Then PPO learns it on as always. PPO learners of the
-    /// grasping machine only (see [`check_start_log_std`]). A narrower noise set on a
-    /// fine-tune keeps sampled actions on grasps that the learned noise breaks
-    /// (docs/notebook/worlds.md, "Sampled actions").
+    /// The older name of `config.init_log_std`, still taken from clients that send it (give
+    /// one of the two; see [`check_start_log_std`]). [`TrainSpec::start_log_std`] reads
+    /// either.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start_log_std: Option<f64>,
     /// `scripted` (default, the paper's protocol) or `learned`.
@@ -119,6 +116,14 @@ pub struct TrainSpec {
     /// bench hold`); evaluations always run the full hold.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settle_s: Option<f64>,
+}
+
+impl TrainSpec {
+    /// Every log standard deviation of the policy at the run's start, if the job sets it
+    /// (`config.init_log_std`, or `start_log_std`, its older name).
+    pub fn start_log_std(&self) -> Option<f64> {
+        self.config.init_log_std.or(self.start_log_std)
+    }
 }
 
 /// Shortest and longest rest (s) a job's `settle_s` may ask: a few control steps, and less
@@ -149,19 +154,25 @@ fn check_seconds(value: Option<f64>, (low, high): (f64, f64), note: &str) -> Res
     }
 }
 
-/// Checks a job's `start_log_std`: absent, or a value within `config.init_log_std`'s range
-/// ([`crate::config::LOG_STD_RANGE`]) for a PPO learner of the grasping machine (crm-ppo,
-/// ippo, lppo), as `imitation` is: SAC's standard deviation is an output of its actor, and the
-/// flat ablation runs as the paper sets it.
-pub fn check_start_log_std(algorithm: Algorithm, value: Option<f64>) -> Result<(), String> {
+/// Checks a job's `start_log_std` (the older name of `config.init_log_std`): absent, or a
+/// value within [`crate::config::LOG_STD_RANGE`] for a PPO learner (SAC's standard deviation
+/// is an output of its actor), and not beside `config.init_log_std`.
+pub fn check_start_log_std(
+    algorithm: Algorithm,
+    value: Option<f64>,
+    init_log_std: Option<f64>,
+) -> Result<(), String> {
     let Some(value) = value else {
         return Ok(());
     };
-    if !algorithm.is_machine_ppo() {
+    if algorithm == Algorithm::CrmSac {
         return Err(format!(
-            "is for the PPO learners of the grasping machine (crm-ppo, ippo, lppo), not {}",
+            "is for the PPO learners (crm-ppo, ippo, lppo, ppo), not {}",
             algorithm.name()
         ));
+    }
+    if init_log_std.is_some() {
+        return Err("is the older name of config.init_log_std: give one of the two".to_string());
     }
     if !crate::config::in_log_std_range(value) {
         let (low, high) = crate::config::LOG_STD_RANGE;
@@ -490,17 +501,37 @@ mod tests {
         ] {
             assert!(check_hold_s(Some(bad)).is_err(), "{bad}");
         }
-        // The starting log standard deviation: PPO learners of the machine, within range.
-        assert!(check_start_log_std(Algorithm::CrmSac, None).is_ok());
-        for algorithm in [Algorithm::CrmPpo, Algorithm::Ippo, Algorithm::Lppo] {
-            assert!(check_start_log_std(algorithm, Some(-2.3)).is_ok());
+        // The starting log standard deviation's older name: PPO learners, within range, and
+        // not beside `config.init_log_std`; either name reads the same.
+        assert!(check_start_log_std(Algorithm::CrmSac, None, None).is_ok());
+        for algorithm in [
+            Algorithm::CrmPpo,
+            Algorithm::Ippo,
+            Algorithm::Lppo,
+            Algorithm::Ppo,
+        ] {
+            assert!(check_start_log_std(algorithm, Some(-2.3), None).is_ok());
+            assert!(check_start_log_std(algorithm, Some(-2.3), Some(-2.3)).is_err());
             for bad in [-5.01, 2.01, f64::NAN, f64::INFINITY] {
-                assert!(check_start_log_std(algorithm, Some(bad)).is_err(), "{bad}");
+                assert!(
+                    check_start_log_std(algorithm, Some(bad), None).is_err(),
+                    "{bad}"
+                );
             }
         }
-        for algorithm in [Algorithm::CrmSac, Algorithm::Ppo] {
-            assert!(check_start_log_std(algorithm, Some(-2.3)).is_err());
-        }
+        assert!(check_start_log_std(Algorithm::CrmSac, Some(-2.3), None).is_err());
+        let old: TrainSpec =
+            serde_json::from_str(r#"{"algorithm":"crm-ppo","steps":1,"start_log_std":-2.3}"#)
+                .expect("train");
+        let new: TrainSpec = serde_json::from_str(
+            r#"{"algorithm":"crm-ppo","steps":1,"config":{"init_log_std":-2.3}}"#,
+        )
+        .expect("train");
+        assert_eq!(old.start_log_std(), Some(-2.3));
+        assert_eq!(new.start_log_std(), Some(-2.3));
+        let fresh: TrainSpec =
+            serde_json::from_str(r#"{"algorithm":"crm-ppo","steps":1}"#).expect("train");
+        assert_eq!(fresh.start_log_std(), None);
         // Curriculum: off unless asked, and not written out when off.
         let spec: TrainSpec =
             serde_json::from_str(r#"{"algorithm":"crm-ppo","steps":1}"#).expect("train");

@@ -65,7 +65,7 @@ impl TrainSpec {
         }
         check_hold_s(self.hold_s).map_err(|message| SpecError::new("hold_s", message))?;
         check_settle_s(self.settle_s).map_err(|message| SpecError::new("settle_s", message))?;
-        check_start_log_std(self.algorithm, self.start_log_std)
+        check_start_log_std(self.algorithm, self.start_log_std, self.config.init_log_std)
             .map_err(|message| SpecError::new("start_log_std", message))?;
         self.config
             .validate()

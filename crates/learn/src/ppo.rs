@@ -84,7 +84,10 @@ impl Ppo {
     pub fn new(layout: Layout, config: PpoConfig, seed: u64) -> Result<Self> {
         config.validate()?;
         let net = ActorCritic::new(layout, &config.hidden, seed)?;
-        net.set_log_std(config.init_log_std as f32)?;
+        let log_std = config
+            .init_log_std
+            .unwrap_or(crm_api::config::DEFAULT_LOG_STD);
+        net.set_log_std(log_std as f32)?;
         let optimizer = Adam::new(net.params(), config.learning_rate);
         Ok(Self {
             scaler: RewardScaler::new(config.gamma as f32),

@@ -227,7 +227,7 @@ fn the_deterministic_action_folds_only_the_folded_dimensions() {
     let layout = Layout::of(env().machine());
     let config = PpoConfig {
         hidden: vec![16, 16],
-        init_log_std: -0.5,
+        init_log_std: Some(-0.5),
         ..PpoConfig::default()
     };
     let mut ppo = Ppo::new(layout, config, 4).expect("ppo");

@@ -171,7 +171,7 @@ impl Trainer {
             }
             // A run's start (fresh or fine-tuned) takes the job's noise; a resumed run keeps
             // what it learned.
-            if !resuming && let Some(log_std) = spec.start_log_std {
+            if !resuming && let Some(log_std) = spec.start_log_std() {
                 ppo.net.set_log_std(log_std as f32)?;
             }
             Learner::Ppo(Box::new(ppo))
@@ -460,16 +460,16 @@ impl Trainer {
 mod tests {
     use super::*;
 
-    fn spec(algorithm: Algorithm, start_log_std: Option<f64>) -> TrainSpec {
+    fn spec(algorithm: Algorithm, init_log_std: Option<f64>) -> TrainSpec {
         let mut spec: TrainSpec = serde_json::from_value(serde_json::json!({
             "algorithm": algorithm.name(),
             "steps": 64,
             "envs": 1,
             "task": "mouse-press",
-            "config": {"rollout_steps": 64, "init_log_std": -0.5},
+            "config": {"rollout_steps": 64},
         }))
         .expect("spec");
-        spec.start_log_std = start_log_std;
+        spec.config.init_log_std = init_log_std;
         spec
     }
 
@@ -485,11 +485,11 @@ mod tests {
     }
 
     #[test]
-    fn start_log_std_sets_a_fresh_or_fine_tuned_policys_noise_and_a_resume_keeps_its_own() {
+    fn init_log_std_sets_a_fresh_or_fine_tuned_policys_noise_and_a_resume_keeps_its_own() {
         let env = Env::default();
         let new = |start, init| Trainer::new(spec(Algorithm::CrmPpo, start), &env, init, None);
         let fresh = new(None, None).expect("fresh");
-        assert!(all_near(&log_std(&fresh), -0.5), "{:?}", log_std(&fresh));
+        assert!(all_near(&log_std(&fresh), 0.0), "{:?}", log_std(&fresh));
         let started = new(Some(-2.0), None).expect("started");
         assert!(all_near(&log_std(&started), -2.0));
 
@@ -513,17 +513,27 @@ mod tests {
             lineage[1].parent_sha256.as_deref(),
             Some(file_sha256(&path).expect("hash").as_str())
         );
-        assert_eq!(lineage[1].job["start_log_std"], -1.0);
+        assert_eq!(lineage[1].job["config"]["init_log_std"], -1.0);
+        // The older name does the same.
+        let mut old = spec(Algorithm::CrmPpo, None);
+        old.start_log_std = Some(-1.0);
+        let by_old_name = Trainer::new(old, &env, Some(Init::FineTune(&path)), None);
+        assert!(all_near(&log_std(&by_old_name.expect("fine-tune")), -1.0));
         // A resume goes on with what the run learned, whatever the spec says.
         let resumed = new(Some(-1.0), Some(Init::Resume(&path))).expect("resume");
         assert!(all_near(&log_std(&resumed), -2.0));
         std::fs::remove_dir_all(&dir).ok();
 
-        for (algorithm, value) in [(Algorithm::CrmSac, -1.0), (Algorithm::CrmPpo, -6.0)] {
-            let err = Trainer::new(spec(algorithm, Some(value)), &env, None, None)
-                .err()
-                .expect("refused");
-            assert!(err.to_string().contains("start_log_std"), "{err}");
-        }
+        let refused = |spec: TrainSpec, field: &str| {
+            let err = Trainer::new(spec, &env, None, None).err().expect("refused");
+            assert!(err.to_string().contains(field), "{err}");
+        };
+        refused(spec(Algorithm::CrmPpo, Some(-6.0)), "config.init_log_std");
+        let mut sac = spec(Algorithm::CrmSac, None);
+        sac.start_log_std = Some(-1.0);
+        refused(sac, "start_log_std");
+        let mut both = spec(Algorithm::CrmPpo, Some(-1.0));
+        both.start_log_std = Some(-1.0);
+        refused(both, "start_log_std");
     }
 }

@@ -22,7 +22,7 @@ pub struct TrainArgs {
     /// `world`, `fine_tune` and `record` name a coordinator's things: give --world DIR and
     /// --fine-tune FILE here.
     #[arg(long, value_name = "FILE", conflicts_with_all = [
-        "algo", "config", "task", "topology", "start_log_std", "bc_episodes", "bc_epochs",
+        "algo", "config", "task", "topology", "init_log_std", "bc_episodes", "bc_epochs",
         "bc_noise", "bc_learning_rate", "bc_tasks", "bc_shifts", "bc_stages",
         "bc_anchor_episodes", "curriculum", "settle_s", "protocol", "hold_s",
     ])]
@@ -60,11 +60,16 @@ pub struct TrainArgs {
     /// and observation layout (the same hand with fewer sensors); steps count from 0.
     #[arg(long, value_name = "FILE", conflicts_with = "resume")]
     pub fine_tune: Option<PathBuf>,
-    /// Every log standard deviation of the policy at the start (a job's `start_log_std`):
-    /// instead of the config's `init_log_std`, or of the --fine-tune checkpoint's own; a
-    /// --resume keeps the checkpoint's.
-    #[arg(long, value_name = "LOG_STD", allow_negative_numbers = true)]
-    pub start_log_std: Option<f64>,
+    /// Every log standard deviation of the policy at the start, over the --config file's
+    /// `init_log_std` (absent from both: 0 on fresh weights, the --fine-tune checkpoint's own);
+    /// a --resume keeps the checkpoint's. `--start-log-std` is its older name.
+    #[arg(
+        long,
+        value_name = "LOG_STD",
+        allow_negative_numbers = true,
+        alias = "start-log-std"
+    )]
+    pub init_log_std: Option<f64>,
     /// Also write a checkpoint every this many iterations (0: only at the end).
     #[arg(long, default_value_t = 0)]
     pub checkpoint_every: u64,
@@ -272,13 +277,17 @@ fn flag_spec(args: &TrainArgs) -> anyhow::Result<TrainSpec> {
             );
         }
     }
-    crm_api::jobs::check_start_log_std(args.algo, args.start_log_std)
-        .map_err(|message| anyhow::anyhow!("--start-log-std: {message}"))?;
-    let (config, sac) = if args.algo == Algorithm::CrmSac {
+    if args.init_log_std.is_some() && args.algo == Algorithm::CrmSac {
+        bail!("--init-log-std: is for the PPO learners (crm-ppo, ippo, lppo, ppo), not crm-sac");
+    }
+    let (mut config, sac) = if args.algo == Algorithm::CrmSac {
         (PpoConfig::default(), read_json::<SacConfig>(&args.config)?)
     } else {
         (read_json::<PpoConfig>(&args.config)?, SacConfig::default())
     };
+    if args.init_log_std.is_some() {
+        config.init_log_std = args.init_log_std;
+    }
     Ok(TrainSpec {
         algorithm: args.algo,
         world: None,
@@ -294,7 +303,7 @@ fn flag_spec(args: &TrainArgs) -> anyhow::Result<TrainSpec> {
         imitation,
         // The command line names a file (`--fine-tune`), not a stored checkpoint.
         fine_tune: None,
-        start_log_std: args.start_log_std,
+        start_log_std: None,
         objective: args.env.protocol,
         curriculum: args.curriculum,
         hold_s: args.env.hold_s,
