@@ -63,15 +63,18 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
     let header = String::from_utf8_lossy(&file.body[8..8 + header_len]);
     assert!(header.contains("crm-grasp-checkpoint/1"), "{header}");
 
-    // Evaluate that checkpoint remotely.
+    // Evaluate that checkpoint remotely, the job given as an experiment document (stored in
+    // the flat form that earlier clients send).
     let eval = submit(
         &addr,
         &format!(
-            r#"{{"kind": "eval", "checkpoint_id": {checkpoint}, "episodes": 3, "task": "mouse-press", "seed": 1}}"#
+            r#"{{"kind": "eval", "checkpoint_id": {checkpoint}, "env": {{"task": "mouse-press"}}, "run": {{"episodes": 3, "seed": 1}}}}"#
         ),
     );
     let eval_id = eval["id"].as_i64().expect("id");
     let evaluated = wait_state(&addr, eval_id, "succeeded", 240);
+    assert_eq!(evaluated["spec"]["episodes"], 3, "{evaluated}");
+    assert_eq!(evaluated["spec"]["task"], "mouse-press", "{evaluated}");
     let result = &evaluated["result"];
     assert_eq!(result["episodes"], 3);
     assert_eq!(result["per_objective"]["press"]["episodes"], 3);
@@ -281,6 +284,35 @@ fn a_job_trains_on_a_worker_is_evaluated_and_survives_a_restart() {
         (
             r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "imitation": {"episodes": 5, "noise": 1.0000000000000002}}"#,
             "imitation.noise",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": "crm-ppo", "steps": 10, "start_log_std": -1, "config": {"init_log_std": -1}}"#,
+            "start_log_std",
+        ),
+        // The experiment document names each refused field where it holds it.
+        (
+            r#"{"kind": "train", "algorithm": {"name": "lppo", "config": {"gamma": 2}}, "run": {"steps": 10}}"#,
+            "algorithm.config.gamma",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": {"name": "crm-ppo"}, "env": {"tasks": ["mug-wrap", "nope"]}, "run": {"steps": 10}}"#,
+            "env.tasks[1]",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": {"name": "crm-ppo"}, "run": {"steps": 10, "imitation": {"episodes": 5, "stages": ["grasp", "success"]}}}"#,
+            "run.imitation.stages",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": {"name": "crm-ppo"}, "env": {"world": "mars"}, "run": {"steps": 10}}"#,
+            "env.world",
+        ),
+        (
+            r#"{"kind": "train", "algorithm": {"name": "crm-ppo"}, "run": {"steps": 0}}"#,
+            "run.steps",
+        ),
+        (
+            r#"{"kind": "eval", "checkpoint_id": 1, "env": {"hold_s": 60}, "run": {}}"#,
+            "env.hold_s",
         ),
         (r#"{"kind": "fly"}"#, "kind"),
         ("not json", "body"),

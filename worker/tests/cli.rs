@@ -294,6 +294,21 @@ fn a_job_document_trains_as_the_same_flags_do() {
             .collect()
     };
     assert_eq!(log("flags"), log("job"));
+    // The experiment document trains the same.
+    let document = serde_json::json!({
+        "kind": "train", "env": {"task": "mouse-press"}, "algorithm": {"name": "lppo"},
+        "run": {"steps": 128, "seed": 5},
+    });
+    std::fs::write(path("document.json"), document.to_string()).expect("write");
+    let (code, _, stderr) = crm(&[
+        "train",
+        "--job",
+        &path("document.json"),
+        "--out",
+        &path("document"),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(log("flags"), log("document"));
     // --steps and --seed override the document.
     let (code, _, stderr) = crm(&[
         "train",
@@ -324,6 +339,16 @@ fn a_job_document_trains_as_the_same_flags_do() {
         (
             serde_json::json!({"algorithm": "lppo", "steps": 64, "stepz": 1}),
             "stepz",
+        ),
+        (
+            serde_json::json!({"algorithm": {"name": "lppo", "config": {"minibatch_size": 0}},
+                "run": {"steps": 64}}),
+            "algorithm.config.minibatch_size",
+        ),
+        (
+            serde_json::json!({"algorithm": {"name": "lppo"}, "env": {"world": "allegro"},
+                "run": {"steps": 64}}),
+            "env.world",
         ),
     ] {
         std::fs::write(path("bad.json"), document.to_string()).expect("write");

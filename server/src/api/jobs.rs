@@ -11,9 +11,9 @@ use axum::extract::rejection::BytesRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
-use crm_api::{EvalSpec, TrainSpec};
+use crm_api::{EvalDocument, EvalSpec, TrainDocument, TrainSpec};
 use serde::de::DeserializeOwned;
-use serde_json::Value;
+use serde_json::{Map, Value};
 
 use super::error::{ApiError, parse_id};
 use crate::AppState;
@@ -69,14 +69,45 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
         Some(Value::String(kind)) => kind,
         Some(_) => return Err(ApiError::invalid("kind", "must be \"train\" or \"eval\"")),
     };
-    let world = world_of(state, fields.get("world"))?;
+    // The experiment document names its fields where it holds them: every refusal too.
+    if fields.contains_key("env") || fields.contains_key("run") {
+        // serde would read a struct from an array too: the document's parts are objects.
+        for part in ["env", "algorithm", "run"] {
+            if fields.get(part).is_some_and(|v| !v.is_object()) {
+                return Err(ApiError::invalid(part, "must be an object"));
+            }
+        }
+        return checked(state, &kind, fields, true)
+            .await
+            .map_err(|mut err| {
+                err.field = err.field.map(|f| crm_api::document::document_path(&f));
+                err
+            });
+    }
+    checked(state, &kind, fields, false).await
+}
+
+/// [`validate`] past `kind`: the flat form, or the document (`crm_api::document`).
+async fn checked(
+    state: &AppState,
+    kind: &str,
+    mut fields: Map<String, Value>,
+    document: bool,
+) -> Result<Submission, ApiError> {
+    let world = match document {
+        true => world_of(state, fields.get("env").and_then(|env| env.get("world")))?,
+        false => world_of(state, fields.get("world"))?,
+    };
     let catalog = &world.catalog;
     let check_task = |task: &Option<String>, tasks: &[String], topology: &Option<String>| {
         check_task(catalog, task, tasks, topology)
     };
-    match kind.as_str() {
+    match kind {
         "train" => {
-            let spec: TrainSpec = decode(Value::Object(fields), "")?;
+            let spec: TrainSpec = match document {
+                true => decode::<TrainDocument>(Value::Object(fields), "")?.into(),
+                false => decode(Value::Object(fields), "")?,
+            };
             spec.validate().map_err(ApiError::spec)?;
             check_task(&spec.task, &spec.tasks, &spec.topology)?;
             check_imitation(catalog, &spec)?;
@@ -96,7 +127,13 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
                 Some(_) => None,
             }
             .ok_or_else(|| ApiError::invalid("checkpoint_id", "must be a positive integer"))?;
-            let spec = eval_spec(catalog, Value::Object(fields))?;
+            let spec = match document {
+                true => {
+                    let doc: EvalDocument = decode(Value::Object(fields), "")?;
+                    checked_eval(catalog, doc.into())?
+                }
+                false => eval_spec(catalog, Value::Object(fields))?,
+            };
             let checkpoint = stored_checkpoint(state, "checkpoint_id", checkpoint_id).await?;
             Ok(Submission {
                 kind: "eval",
@@ -182,7 +219,11 @@ pub(super) fn check_task(
 /// An evaluation's parameters (an eval submission without `kind` and `checkpoint_id`),
 /// checked against the catalog.
 pub(super) fn eval_spec(catalog: &crm_api::Catalog, fields: Value) -> Result<EvalSpec, ApiError> {
-    let spec: EvalSpec = decode(fields, "")?;
+    checked_eval(catalog, decode(fields, "")?)
+}
+
+/// An evaluation's parameters, checked against the catalog.
+fn checked_eval(catalog: &crm_api::Catalog, spec: EvalSpec) -> Result<EvalSpec, ApiError> {
     spec.validate().map_err(ApiError::spec)?;
     check_task(catalog, &spec.task, &spec.tasks, &spec.topology)?;
     Ok(spec)

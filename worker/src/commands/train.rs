@@ -17,8 +17,9 @@ use crm_run::imitation;
 pub struct TrainArgs {
     #[command(flatten)]
     pub env: EnvArgs,
-    /// A training job's document as `POST /api/v1/jobs` takes it (`kind` may be left out),
-    /// instead of the flags that set its fields; --steps, --seed and --envs override it. Its
+    /// A training job's document as `POST /api/v1/jobs` takes it (`kind` may be left out;
+    /// the experiment document `{"env", "algorithm", "run"}` or the flat form), instead of the
+    /// flags that set its fields; --steps, --seed and --envs override it. Its
     /// `world`, `fine_tune` and `record` name a coordinator's things: give --world DIR and
     /// --fine-tune FILE here.
     #[arg(long, value_name = "FILE", conflicts_with_all = [
@@ -327,8 +328,18 @@ fn job_spec(args: &TrainArgs, path: &std::path::Path) -> anyhow::Result<TrainSpe
             ),
         }
     }
-    let mut spec: TrainSpec = serde_json::from_value(document)
-        .with_context(|| format!("parsing {} as a training job", path.display()))?;
+    // The experiment document (`env`, `algorithm`, `run`) or the flat form.
+    let nested = crm_api::document::is_document(&document);
+    let name = |field: &str| match nested {
+        true => crm_api::document::document_path(field),
+        false => field.to_string(),
+    };
+    let parsed = match nested {
+        true => serde_json::from_value::<crm_api::TrainDocument>(document).map(TrainSpec::from),
+        false => serde_json::from_value(document),
+    };
+    let mut spec: TrainSpec =
+        parsed.with_context(|| format!("parsing {} as a training job", path.display()))?;
     for (field, set, instead) in [
         ("world", spec.world.is_some(), "give --world DIR"),
         (
@@ -340,8 +351,9 @@ fn job_spec(args: &TrainArgs, path: &std::path::Path) -> anyhow::Result<TrainSpe
     ] {
         if set {
             bail!(
-                "{}: {field} names the coordinator's things, which `crm train` does not have: {instead}",
-                path.display()
+                "{}: {} names the coordinator's things, which `crm train` does not have: {instead}",
+                path.display(),
+                name(field)
             );
         }
     }
@@ -354,8 +366,13 @@ fn job_spec(args: &TrainArgs, path: &std::path::Path) -> anyhow::Result<TrainSpe
     if args.envs.is_some() {
         spec.envs = args.envs;
     }
-    spec.validate()
-        .map_err(|err| anyhow::anyhow!("{}: {err}", path.display()))?;
+    spec.validate().map_err(|err| {
+        let err = crm_api::SpecError {
+            field: name(&err.field),
+            ..err
+        };
+        anyhow::anyhow!("{}: {err}", path.display())
+    })?;
     Ok(spec)
 }
 
