@@ -43,11 +43,14 @@ fn jobs_name_a_world_that_workers_run_and_checkpoints_keep_to() {
     assert_eq!(tasks["tasks"].as_array().map(Vec::len), Some(3));
     let openapi = get(&addr, "/api/v1/openapi.json");
     let world_enum =
-        &openapi["components"]["schemas"]["EvalRequest"]["properties"]["world"]["enum"];
+        &openapi["components"]["schemas"]["EvalFlatRequest"]["properties"]["world"]["enum"];
     assert_eq!(
         world_enum,
         &serde_json::json!(["crm", "test-hand", "test-hand4", null])
     );
+    // The experiment document's `env` too.
+    let document = &openapi["components"]["schemas"]["TrainPpoDocument"]["properties"];
+    assert_eq!(&document["env"]["properties"]["world"]["enum"], world_enum);
     // Every world's task ids name the tasks and the palm shifts a cloning may give.
     let imitation = &openapi["components"]["schemas"]["ImitationSpec"]["properties"];
     let ids: Vec<&str> = tasks["tasks"]

@@ -76,8 +76,14 @@ fn the_documents_task_and_topology_enums_are_the_catalogs() {
             .collect()
     };
     let schemas = &doc["components"]["schemas"];
-    for name in ["TrainPpoRequest", "TrainOtherRequest", "EvalRequest"] {
-        let props = &schemas[name]["properties"];
+    let flat = ["TrainPpoRequest", "TrainOtherRequest", "EvalFlatRequest"];
+    let documents = ["TrainPpoDocument", "TrainOtherDocument", "EvalDocument"];
+    let envs = documents.map(|name| (name, &schemas[name]["properties"]["env"]["properties"]));
+    for (name, props) in flat
+        .map(|name| (name, &schemas[name]["properties"]))
+        .into_iter()
+        .chain(envs)
+    {
         assert_eq!(strings(&props["task"]["enum"]), ids, "{name}.task");
         assert_eq!(
             strings(&props["tasks"]["items"]["enum"]),
@@ -128,10 +134,20 @@ fn the_documents_learner_settings_are_the_configs_fields() {
         keys.sort();
         keys
     };
-    let ppo = serde_json::to_value(crm_api::PpoConfig::default()).expect("ppo config");
-    let sac = serde_json::to_value(crm_api::SacConfig::default()).expect("sac config");
-    assert_eq!(keys(&schemas["PpoConfig"]["properties"]), keys(&ppo));
-    assert_eq!(keys(&schemas["SacConfig"]["properties"]), keys(&sac));
+    let fields = |names: &[&str]| -> Vec<String> {
+        let mut names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+        names.sort();
+        names
+    };
+    use crm_api::fields::field_names;
+    assert_eq!(
+        keys(&schemas["PpoConfig"]["properties"]),
+        fields(field_names::<crm_api::PpoConfig>())
+    );
+    assert_eq!(
+        keys(&schemas["SacConfig"]["properties"]),
+        fields(field_names::<crm_api::SacConfig>())
+    );
     // Every value the document allows for the schedule parses.
     for value in schemas["PpoConfig"]["properties"]["lr_schedule"]["enum"]
         .as_array()
@@ -167,4 +183,56 @@ fn the_documents_nullable_train_fields_are_the_ones_the_server_accepts_as_null()
             );
         }
     }
+}
+
+/// The experiment documents' parts list the fields their Rust types read, so that a field
+/// added to one is documented.
+#[test]
+fn the_documents_experiment_parts_are_the_types_fields() {
+    use crm_api::document::{AlgorithmSpec, EnvSpec, EvalRunSpec, RunSpec};
+    use crm_api::fields::field_names;
+    let doc: serde_json::Value =
+        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
+    let schemas = &doc["components"]["schemas"];
+    let keys = |v: &serde_json::Value| -> Vec<String> {
+        let mut keys: Vec<String> = v.as_object().expect("object").keys().cloned().collect();
+        keys.sort();
+        keys
+    };
+    let fields = |names: &[&str]| -> Vec<String> {
+        let mut names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+        names.sort();
+        names
+    };
+    for name in ["TrainPpoDocument", "TrainOtherDocument", "EvalDocument"] {
+        let parts = &schemas[name]["properties"];
+        assert_eq!(
+            keys(&parts["env"]["properties"]),
+            fields(field_names::<EnvSpec>()),
+            "{name}.env"
+        );
+    }
+    for name in ["TrainPpoDocument", "TrainOtherDocument"] {
+        let parts = &schemas[name]["properties"];
+        assert_eq!(
+            keys(&parts["algorithm"]["properties"]),
+            fields(field_names::<AlgorithmSpec>()),
+            "{name}.algorithm"
+        );
+    }
+    // A learner other than the machine's PPO takes no imitation.
+    let mut run = fields(field_names::<RunSpec>());
+    assert_eq!(
+        keys(&schemas["TrainPpoDocument"]["properties"]["run"]["properties"]),
+        run
+    );
+    run.retain(|f| f != "imitation");
+    assert_eq!(
+        keys(&schemas["TrainOtherDocument"]["properties"]["run"]["properties"]),
+        run
+    );
+    assert_eq!(
+        keys(&schemas["EvalDocument"]["properties"]["run"]["properties"]),
+        fields(field_names::<EvalRunSpec>())
+    );
 }

@@ -635,7 +635,9 @@ fn cloning_can_teach_one_task_with_a_palm_shift_while_anchor_states_keep_the_oth
         (&["--bc-shift", "mouse-press=0.5,0,0"][..], "--bc-shift"),
         (&["--bc-shift", "nope=0,0,0"][..], "imitation.shifts"),
         (&["--bc-task", "nope"][..], "imitation.tasks"),
-        (&["--start-log-std", "-6"][..], "--start-log-std"),
+        (&["--init-log-std", "-6"][..], "--init-log-std"),
+        // The older name of the flag is an alias.
+        (&["--start-log-std", "2.5"][..], "--init-log-std"),
     ] {
         let (code, _, stderr) = train(extra);
         assert_eq!(code, 2, "{extra:?}: {stderr}");

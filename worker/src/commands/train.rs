@@ -278,8 +278,16 @@ fn flag_spec(args: &TrainArgs) -> anyhow::Result<TrainSpec> {
             );
         }
     }
-    if args.init_log_std.is_some() && args.algo == Algorithm::CrmSac {
-        bail!("--init-log-std: is for the PPO learners (crm-ppo, ippo, lppo, ppo), not crm-sac");
+    if let Some(value) = args.init_log_std {
+        if args.algo == Algorithm::CrmSac {
+            bail!(
+                "--init-log-std: is for the PPO learners (crm-ppo, ippo, lppo, ppo), not crm-sac"
+            );
+        }
+        if !crm_api::config::in_log_std_range(value) {
+            let (low, high) = crm_api::config::LOG_STD_RANGE;
+            bail!("--init-log-std: must be in [{low}, {high}] (a log standard deviation)");
+        }
     }
     let (mut config, sac) = if args.algo == Algorithm::CrmSac {
         (PpoConfig::default(), read_json::<SacConfig>(&args.config)?)
