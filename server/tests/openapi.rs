@@ -129,16 +129,6 @@ fn the_documents_learner_settings_are_the_configs_fields() {
     let doc: serde_json::Value =
         serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
     let schemas = &doc["components"]["schemas"];
-    let keys = |v: &serde_json::Value| -> Vec<String> {
-        let mut keys: Vec<String> = v.as_object().expect("object").keys().cloned().collect();
-        keys.sort();
-        keys
-    };
-    let fields = |names: &[&str]| -> Vec<String> {
-        let mut names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
-        names.sort();
-        names
-    };
     use crm_api::fields::field_names;
     assert_eq!(
         keys(&schemas["PpoConfig"]["properties"]),
@@ -194,16 +184,6 @@ fn the_documents_experiment_parts_are_the_types_fields() {
     let doc: serde_json::Value =
         serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
     let schemas = &doc["components"]["schemas"];
-    let keys = |v: &serde_json::Value| -> Vec<String> {
-        let mut keys: Vec<String> = v.as_object().expect("object").keys().cloned().collect();
-        keys.sort();
-        keys
-    };
-    let fields = |names: &[&str]| -> Vec<String> {
-        let mut names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
-        names.sort();
-        names
-    };
     for name in ["TrainPpoDocument", "TrainOtherDocument", "EvalDocument"] {
         let parts = &schemas[name]["properties"];
         assert_eq!(
@@ -235,4 +215,18 @@ fn the_documents_experiment_parts_are_the_types_fields() {
         keys(&schemas["EvalDocument"]["properties"]["run"]["properties"]),
         fields(field_names::<EvalRunSpec>())
     );
+}
+
+/// An object's keys, sorted.
+fn keys(value: &serde_json::Value) -> Vec<String> {
+    let mut keys: Vec<String> = value.as_object().expect("object").keys().cloned().collect();
+    keys.sort();
+    keys
+}
+
+/// Field names, sorted.
+fn fields(names: &[&str]) -> Vec<String> {
+    let mut names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+    names.sort();
+    names
 }

@@ -2,30 +2,11 @@
 //! platform topology brings that point, not the profile's, to a press task's grasp location,
 //! and leaves every other topology's episodes as they were.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
-use grasp_sim::assets::Assets;
 use grasp_sim::benchmark::Topology;
 use grasp_sim::{GraspEnv, SimConfig, World};
 
-fn test_world(tag: &str) -> PathBuf {
-    let root = std::env::temp_dir().join(format!("crm-test-gp-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make-test-world");
-    let status = Command::new("python3")
-        .arg(&script)
-        .arg(&root)
-        .status()
-        .expect("python3 runs scripts/make-test-world");
-    assert!(status.success(), "make-test-world failed");
-    root
-}
-
-fn load(root: &Path) -> World {
-    let assets = Assets::parse(&root.join("assets").display().to_string());
-    World::load_with(&root.join("world"), &assets).expect("the test world loads")
-}
+mod common;
+use common::{load, test_world};
 
 /// The palm's position and the grasp point's distance to the grasp location at reset.
 fn start(world: &World, task: &str) -> ([f32; 3], f32) {

@@ -13,27 +13,8 @@ use grasp_sim::assets::Assets;
 use grasp_sim::benchmark::Shape;
 use grasp_sim::{GraspEnv, SimConfig, World};
 
-/// A fresh copy of the test world under the temporary folder.
-fn test_world(tag: &str) -> PathBuf {
-    let root = std::env::temp_dir().join(format!("crm-test-world-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make-test-world");
-    let status = Command::new("python3")
-        .arg(&script)
-        .arg(&root)
-        .status()
-        .expect("python3 runs scripts/make-test-world");
-    assert!(status.success(), "make-test-world failed");
-    root
-}
-
-fn assets(root: &Path) -> Assets {
-    Assets::parse(&root.join("assets").display().to_string())
-}
-
-fn load(root: &Path) -> World {
-    World::load_with(&root.join("world"), &assets(root)).expect("the test world loads")
-}
+mod common;
+use common::{assets, load, test_world};
 
 /// Raises the hand clear of everything, commands the index finger to `command` and lets it
 /// settle; returns each of its joints' (angle, expected angle).

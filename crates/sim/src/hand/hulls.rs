@@ -9,9 +9,9 @@ use rapier3d::parry::shape::SharedShape;
 use rapier3d::prelude::*;
 
 /// Hulls above this many points are rebuilt. Measured (`crm bench env --world W --steps
-/// 1500`): the SVH's hulls in the paper's world (72-418 points) cost it 14% of its steps,
-/// and rebuilding them moves its shipped model's evaluation (0.965 -> 0.952), so they stay;
-/// Allegro's (701 points) cost 29%, LEAP's (5,949 and 6,195) 95%.
+/// 1500`, one core): rebuilding the SVH's hulls in the paper's world (72-418 points) would
+/// step it 14% faster but moves its shipped model's evaluation (0.965 -> 0.952), so they
+/// stay; rebuilt, Allegro's (701 points) step 29% faster, LEAP's (5,949 and 6,195) 19x.
 pub const LARGE_HULL: usize = 500;
 
 /// Points a rebuilt hull keeps: LEAP steps 1,836 control steps/s on one core with 64, 1,041
