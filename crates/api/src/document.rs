@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::{PpoConfig, SacConfig};
 use crate::fields::field_names;
 use crate::imitation::ImitationSpec;
-use crate::jobs::{EvalSpec, ObjectiveMode, TrainSpec};
+use crate::jobs::{EvalSpec, ObjectiveMode, TrainSpec, default_episodes, is_default_sac};
 use crate::{Algorithm, RecordSpec};
 
 /// Where a job runs: the world, its tasks and topology, who executes the objective, and the
@@ -43,10 +43,6 @@ pub struct AlgorithmSpec {
     pub config: PpoConfig,
     #[serde(default, skip_serializing_if = "is_default_sac")]
     pub sac: SacConfig,
-}
-
-fn is_default_sac(config: &SacConfig) -> bool {
-    *config == SacConfig::default()
 }
 
 /// How a training run goes: its length and seed, parallel environments, where it starts from
@@ -106,10 +102,6 @@ impl Default for EvalRunSpec {
     }
 }
 
-fn default_episodes() -> u64 {
-    EvalSpec::default().episodes
-}
-
 /// An evaluation job as one document (the checkpoint is given beside it). `run` is required,
 /// `{}` for every default, so that a document and the flat form never read alike.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -120,10 +112,10 @@ pub struct EvalDocument {
     pub run: EvalRunSpec,
 }
 
-/// Whether a job's body (without `kind` and `checkpoint_id`) is a document rather than the
-/// flat form: it has an `env` or a `run` member.
-pub fn is_document(body: &serde_json::Value) -> bool {
-    body.get("env").is_some() || body.get("run").is_some()
+/// Whether a job's body (its members) is a document rather than the flat form: it has an
+/// `env` or a `run` member.
+pub fn is_document(fields: &serde_json::Map<String, serde_json::Value>) -> bool {
+    fields.contains_key("env") || fields.contains_key("run")
 }
 
 /// Where a document holds the flat spec's field `path` (`config.minibatch_size` ->
@@ -346,8 +338,11 @@ mod tests {
         let empty: EvalDocument = serde_json::from_str(r#"{"run": {}}"#).expect("defaults");
         assert_eq!(EvalSpec::from(empty), EvalSpec::default());
 
-        assert!(is_document(&serde_json::json!({"run": {"steps": 1}})));
-        assert!(!is_document(&serde_json::json!({"steps": 1})));
+        let fields = |value: serde_json::Value| value.as_object().cloned().unwrap_or_default();
+        assert!(is_document(&fields(
+            serde_json::json!({"run": {"steps": 1}})
+        )));
+        assert!(!is_document(&fields(serde_json::json!({"steps": 1}))));
         // A flat field inside a document is refused by name.
         let err = serde_json::from_value::<TrainDocument>(serde_json::json!({
             "algorithm": {"name": "crm-ppo"}, "run": {"steps": 1}, "steps": 2,

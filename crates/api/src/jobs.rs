@@ -183,7 +183,7 @@ pub fn check_start_log_std(
     Ok(())
 }
 
-fn is_default_sac(config: &SacConfig) -> bool {
+pub(crate) fn is_default_sac(config: &SacConfig) -> bool {
     *config == SacConfig::default()
 }
 
@@ -230,7 +230,7 @@ pub struct EvalSpec {
     pub hold_s: Option<f64>,
 }
 
-fn default_episodes() -> u64 {
+pub(crate) fn default_episodes() -> u64 {
     1000
 }
 

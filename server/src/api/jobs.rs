@@ -70,7 +70,7 @@ pub(super) async fn validate(state: &AppState, body: Value) -> Result<Submission
         Some(_) => return Err(ApiError::invalid("kind", "must be \"train\" or \"eval\"")),
     };
     // The experiment document names its fields where it holds them: every refusal too.
-    if fields.contains_key("env") || fields.contains_key("run") {
+    if crm_api::document::is_document(&fields) {
         // serde would read a struct from an array too: the document's parts are objects.
         for part in ["env", "algorithm", "run"] {
             if fields.get(part).is_some_and(|v| !v.is_object()) {

@@ -278,17 +278,9 @@ fn flag_spec(args: &TrainArgs) -> anyhow::Result<TrainSpec> {
             );
         }
     }
-    if let Some(value) = args.init_log_std {
-        if args.algo == Algorithm::CrmSac {
-            bail!(
-                "--init-log-std: is for the PPO learners (crm-ppo, ippo, lppo, ppo), not crm-sac"
-            );
-        }
-        if !crm_api::config::in_log_std_range(value) {
-            let (low, high) = crm_api::config::LOG_STD_RANGE;
-            bail!("--init-log-std: must be in [{low}, {high}] (a log standard deviation)");
-        }
-    }
+    // The flag's checks are those of the job field it stands for.
+    crm_api::jobs::check_start_log_std(args.algo, args.init_log_std, None)
+        .map_err(|message| anyhow::anyhow!("--init-log-std: {message}"))?;
     let (mut config, sac) = if args.algo == Algorithm::CrmSac {
         (PpoConfig::default(), read_json::<SacConfig>(&args.config)?)
     } else {
@@ -337,7 +329,9 @@ fn job_spec(args: &TrainArgs, path: &std::path::Path) -> anyhow::Result<TrainSpe
         }
     }
     // The experiment document (`env`, `algorithm`, `run`) or the flat form.
-    let nested = crm_api::document::is_document(&document);
+    let nested = document
+        .as_object()
+        .is_some_and(crm_api::document::is_document);
     let name = |field: &str| match nested {
         true => crm_api::document::document_path(field),
         false => field.to_string(),
