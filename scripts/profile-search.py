@@ -3,7 +3,7 @@
 
 usage: scripts/profile-search.py WORLD OUT.jsonl --seconds S [--workers N] [--seeds K]
                                  [--held JOINT=LO:HI ...] [--box X0:X1,Y0:Y1,Z0:Z1]
-                                 [--torques T,T,...] [--topology NAME]
+                                 [--torques T,T,...] [--topology NAME] [--keep-closed]
 
 For each sample it writes a copy of WORLD's `hand.json` with the grasp point drawn from
 `--box` (palm frame, m), each `--held` joint drawn from its range, the motors' torque from
@@ -11,7 +11,8 @@ For each sample it writes a copy of WORLD's `hand.json` with the grasp point dra
 finger's range, runs `crm oracle --world COPY --json --seeds K`, and appends the sample and its
 success to OUT.jsonl (one JSON line each). With `--topology NAME` the sample is that topology's
 own (its `grasp_point`, `held` and `closed`; the torque stays the profile's) and the oracle runs
-that topology's tasks only. The best line is a profile to try with more seeds.
+that topology's tasks only; with `--keep-closed` the profile's closed commands stay (a world
+whose closing comes from its authors' data). The best line is a profile to try with more seeds.
 `crm` is the release build (`CARGO_TARGET_DIR`, else `target/`); the description is found as
 the world finds it (`CRM_ASSETS`). docs/WORLDS.md, "Bring your hand", has the Allegro search.
 """
@@ -71,7 +72,7 @@ def profile(base, world_dir, p):
         hand["held"] = {**hand.get("held", {}), **p["held"]}
         hand["motor"]["torque"] = p["torque"]
         shapes = hand["topologies"].values()
-    for topology in shapes:
+    for topology in shapes if p.get("close") else []:
         for finger in list(topology.get("closed", {})):
             lo, hi = hand["fingers"][finger]["range"]
             topology["closed"][finger] = round(lo + p["close"] * (hi - lo) * 0.999, 3)
@@ -93,6 +94,8 @@ def run(job):
     base = json.load(open(os.path.join(world_dir, world["hand"])))
     p = sample(random.Random(index), args)
     tasks = []
+    if args.keep_closed:
+        p.pop("close")
     if args.topology:
         p["topology"] = args.topology
         p.pop("torque")
@@ -126,6 +129,7 @@ def main():
     parser.add_argument("--box", default="0.0:0.1,-0.03:0.03,-0.1:0.03")
     parser.add_argument("--held", action="append", default=[], metavar="JOINT=LO:HI")
     parser.add_argument("--torques", default="0.2,0.35,0.5,0.7", help="motor torques to draw (N m)")
+    parser.add_argument("--keep-closed", action="store_true", help="keep the profile's closed commands")
     parser.add_argument("--topology", help="search this topology's own grasp point, held joints and closing")
     args = parser.parse_args()
     try:

@@ -164,3 +164,62 @@ fn a_scripted_twist_backs_off_before_the_grip_crushes_the_object() {
         "pushed {pushed}, backed off {backed}"
     );
 }
+
+/// The arm's twist turns the wrist about the object's axis: from the oracle's closed grasp of
+/// the built-in jar, the execution moves the mount on a circle about that axis and turns it
+/// about the axis, in the direction of the task's torque, and the lid turns.
+#[test]
+fn a_scripted_twist_turns_the_wrist_about_the_objects_axis() {
+    let benchmark = Arc::new(Benchmark::builtin());
+    let task = task_index(&benchmark, "jar-twist");
+    let config = SimConfig {
+        protocol: Protocol::Learned,
+        ..SimConfig::deterministic()
+    };
+    let mut env = GraspEnv::new(benchmark.clone(), config);
+    env.set_task_choice(TaskChoice::Fixed(task)).expect("task");
+    let mut crm_env = crm::CrmEnv::new(grasping_machine(), env, crm::RewardMode::Crm);
+    let (mut stage, _) = crm_env.reset(0).expect("reset");
+    let mut oracle = Oracle::new();
+    // Close as the oracle does, up to its objective phase.
+    for _ in 0..200 {
+        let name = crm_env.machine().stage_name(stage).to_string();
+        let env = crm_env.env();
+        let action = oracle.act(env, &name);
+        if name == "grasp" && action == objective_action(env, wanted_grip(env)) {
+            break;
+        }
+        stage = crm_env.step(&action).expect("step").stage;
+    }
+    let (_, mut env) = crm_env.into_parts();
+    let scene = env.scene().expect("scene");
+    let (pivot, axis) = (
+        scene.object_start.translation,
+        scene.object_start.rotation * Vec3::Z,
+    );
+    let radius = |p: Vec3| {
+        let arm = p - pivot;
+        (arm - arm.dot(axis) * axis).length()
+    };
+    let before = scene.hand.mount_pose(&scene.world);
+    let events = env.execute_objective().expect("execute");
+    assert!(events.contains(&"succ"), "{events:?}");
+    let scene = env.scene().expect("scene");
+    let after = scene.hand.mount_pose(&scene.world);
+    let (turn_axis, angle) = (after.rotation * before.rotation.inverse()).to_axis_angle();
+    let required = benchmark.tasks[task].required.expect("a twist's torque");
+    assert!(angle > 0.01, "the wrist turned {angle} rad");
+    assert!(
+        turn_axis.dot(axis) * required.signum() > 0.99,
+        "turned about {turn_axis:?}, the axis is {axis:?}"
+    );
+    let (r0, r1) = (radius(before.translation), radius(after.translation));
+    assert!(
+        (r0 - r1).abs() < 1e-3,
+        "the mount left its circle: {r0} -> {r1}"
+    );
+    assert!(
+        (after.translation - before.translation).dot(axis).abs() < 1e-3,
+        "the mount moved along the axis"
+    );
+}

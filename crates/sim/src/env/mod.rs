@@ -348,7 +348,7 @@ impl GraspEnv {
         self.clipped += clipped;
         self.preshape_step()?;
         self.move_fingers(&fingers)?;
-        let mut events = self.advance(delta)?;
+        let mut events = self.advance(delta, 0.0)?;
         self.steps += 1;
         if self.hands_over(&events) {
             events = self.execute_objective()?;
@@ -408,16 +408,30 @@ impl GraspEnv {
         Ok(())
     }
 
-    /// Moves the arm by `delta` over one control step's physics steps and observes; returns
-    /// the events that hold after it.
-    fn advance(&mut self, delta: Vec3) -> Result<Vec<&'static str>> {
+    /// Moves the arm by `delta` and turns the wrist by `spin` (rad) about the object's twist
+    /// axis ([`Scene::twist_torque`]'s) over one control step's physics steps, and observes;
+    /// returns the events that hold after it.
+    fn advance(&mut self, delta: Vec3, spin: f32) -> Result<Vec<&'static str>> {
         let scene = self.scene.as_mut().ok_or(Error::NotReset)?;
         let start = self.mount_target;
         // Keep the arm above the table and near the workspace.
         let target = (start + delta).clamp(Vec3::new(-0.4, -0.4, 0.02), Vec3::new(0.4, 0.4, 0.6));
-        self.mount_target = target;
         let substeps = self.config.substeps.max(1);
         let object = scene.object;
+        let pivot = scene.object_start.translation;
+        let axis = scene.object_start.rotation * Vec3::Z;
+        let mount_rotation = scene.hand.mount_pose(&scene.world).rotation;
+        // The mount's pose after the share `alpha` of this step: moved towards `target`,
+        // then turned by that share of `spin` about the twist axis.
+        let pose_at = |alpha: f32| {
+            let moved = start.lerp(target, alpha);
+            if spin == 0.0 {
+                return (moved, None);
+            }
+            let turn = Rotation::from_axis_angle(axis, spin * alpha);
+            (pivot + turn * (moved - pivot), Some(turn * mount_rotation))
+        };
+        self.mount_target = pose_at(1.0).0;
         // In the approach the wrist keeps the task's orientation on the object as it moves
         // (the authors' IK re-aims at the object's pose every step), a bounded turn per step.
         let turn = if self.stage == "approach" {
@@ -440,10 +454,11 @@ impl GraspEnv {
         let mut last = ContactMetrics::default();
         for k in 1..=substeps {
             let alpha = k as f32 / substeps as f32;
-            let rotation = turn.map(|(from, to)| from.slerp(to, alpha));
+            let (translation, spun) = pose_at(alpha);
+            let rotation = turn.map(|(from, to)| from.slerp(to, alpha)).or(spun);
             scene
                 .hand
-                .move_mount(&mut scene.world, start.lerp(target, alpha), rotation);
+                .move_mount(&mut scene.world, translation, rotation);
             scene.world.step_with_events(&scene.stiction, &());
             last = object_contacts(&scene.world, object, |_, collider| {
                 collider

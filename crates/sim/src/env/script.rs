@@ -1,11 +1,13 @@
 //! The arm's objective controllers: what the arm does once the grasp is ready (the paper's
 //! protocol runs them inside the environment step; the oracle runs them as its last phase).
-//! Lift (along the task's motion) to just above the success height, twist along the
-//! tangent (backing off when the grip nears the fragility limit), or press down under force
-//! regulation. The fingers keep the grasp they were given: they open a little when the grip
-//! nears the fragility limit and close a little when it relaxes under 80% of the grip they
-//! are to `hold` (the grip at the hand-over for the environment's execution, [`wanted_grip`]
-//! for the oracle). A loose grasp stays loose.
+//! Lift (along the task's motion) to just above the success height, twist (the execution
+//! turns the wrist about the object's axis, [`twist_spin`]; before a hand-over the palm
+//! pushes along the tangent), backing off when the grip nears the fragility limit, or press
+//! down under force regulation. The fingers keep the grasp they were given: they open a
+//! little when the grip nears the fragility limit and close a little when it relaxes under
+//! 80% of the grip they are to `hold` (the grip at the hand-over for the environment's
+//! execution, at least a share of the limit for a twist; [`wanted_grip`] for the oracle). A
+//! loose grasp stays loose.
 
 use rapier3d::prelude::Vec3;
 
@@ -27,6 +29,36 @@ const LIFT_MARGIN: f32 = 0.02;
 /// "The twist: the control step's torque").
 const TWIST_PUSH: f32 = 0.5;
 const TWIST_BACK_OFF: f32 = 0.2;
+
+/// Shortest radius (m) from the twist axis that a twist's turn is paced for: a grasp point on
+/// the axis would otherwise turn without bound.
+const TWIST_MIN_RADIUS: f32 = 0.02;
+
+/// The wrist's turn (rad) about the object's twist axis for one control step of a twist: the
+/// grasp point moves along its circle at the tangential push's speed ([`TWIST_PUSH`] of a
+/// grasp step, [`TWIST_BACK_OFF`] back when the grip nears the fragility limit), in the
+/// direction of the task's torque. Turning the whole hand, the fingers twist the object
+/// whichever side of its axis they hold it on.
+pub fn twist_spin(env: &GraspEnv) -> f32 {
+    let Some(scene) = env.scene() else {
+        return 0.0;
+    };
+    let limit = env
+        .benchmark()
+        .object_of(env.task())
+        .fragility
+        .grasp_force_limit();
+    let near_limit = env.observation_parts().grip * limit > 0.8 * limit;
+    let speed = if near_limit {
+        -TWIST_BACK_OFF
+    } else {
+        TWIST_PUSH
+    } * GRASP_SCALE;
+    let axis = scene.object_start.rotation * Vec3::Z;
+    let arm = scene.hand.grasp_point(&scene.world) - scene.object_start.translation;
+    let radius = (arm - arm.dot(axis) * axis).length().max(TWIST_MIN_RADIUS);
+    env.task().required.unwrap_or(1.0).signum() * speed / radius
+}
 
 fn unit(value: f32, scale: f32) -> f32 {
     (value / scale).clamp(-1.0, 1.0)
