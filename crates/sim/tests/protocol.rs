@@ -104,6 +104,20 @@ fn a_scripted_lift_of_a_firmly_held_box_succeeds_and_of_a_loosely_held_one_fails
     );
 }
 
+/// An episode of `task` under the learned protocol (no step hands over to the arm), reset
+/// with seed 0.
+fn learned(benchmark: &Arc<Benchmark>, task: usize) -> (crm::CrmEnv<GraspEnv>, crm::StageId) {
+    let config = SimConfig {
+        protocol: Protocol::Learned,
+        ..SimConfig::deterministic()
+    };
+    let mut env = GraspEnv::new(benchmark.clone(), config);
+    env.set_task_choice(TaskChoice::Fixed(task)).expect("task");
+    let mut crm_env = crm::CrmEnv::new(grasping_machine(), env, crm::RewardMode::Crm);
+    let (stage, _) = crm_env.reset(0).expect("reset");
+    (crm_env, stage)
+}
+
 /// The arm's twist, driven step by step (the learned protocol, so that no step hands over),
 /// on a valve made fragile so that its push reaches the grip limit: the palm pushes along
 /// the tangent, backs off when the grip nears the limit, and the valve is not crushed.
@@ -120,14 +134,7 @@ fn a_scripted_twist_backs_off_before_the_grip_crushes_the_object() {
     object.fragility = Fragility::Fragile;
     let limit = Fragility::Fragile.grasp_force_limit();
     let benchmark = Arc::new(benchmark);
-    let config = SimConfig {
-        protocol: Protocol::Learned,
-        ..SimConfig::deterministic()
-    };
-    let mut env = GraspEnv::new(benchmark.clone(), config);
-    env.set_task_choice(TaskChoice::Fixed(task)).expect("task");
-    let mut crm_env = crm::CrmEnv::new(grasping_machine(), env, crm::RewardMode::Crm);
-    let (mut stage, _) = crm_env.reset(0).expect("reset");
+    let (mut crm_env, mut stage) = learned(&benchmark, task);
     let mut oracle = Oracle::new();
     let motion = Vec3::from(benchmark.tasks[task].motion);
     let (mut pushed, mut backed) = (0, 0);
@@ -172,14 +179,7 @@ fn a_scripted_twist_backs_off_before_the_grip_crushes_the_object() {
 fn a_scripted_twist_turns_the_wrist_about_the_objects_axis() {
     let benchmark = Arc::new(Benchmark::builtin());
     let task = task_index(&benchmark, "jar-twist");
-    let config = SimConfig {
-        protocol: Protocol::Learned,
-        ..SimConfig::deterministic()
-    };
-    let mut env = GraspEnv::new(benchmark.clone(), config);
-    env.set_task_choice(TaskChoice::Fixed(task)).expect("task");
-    let mut crm_env = crm::CrmEnv::new(grasping_machine(), env, crm::RewardMode::Crm);
-    let (mut stage, _) = crm_env.reset(0).expect("reset");
+    let (mut crm_env, mut stage) = learned(&benchmark, task);
     let mut oracle = Oracle::new();
     // Close as the oracle does, up to its objective phase.
     for _ in 0..200 {
