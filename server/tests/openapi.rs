@@ -4,8 +4,7 @@
 
 #[test]
 fn every_route_is_in_the_openapi_document() {
-    let doc: serde_json::Value =
-        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
+    let doc = document();
     let paths = doc["paths"].as_object().expect("paths");
     let source = include_str!("../src/api/mod.rs");
     let mut routes = Vec::new();
@@ -48,9 +47,8 @@ fn the_binary_refuses_bad_settings_with_exit_code_2() {
 
 #[test]
 fn the_documents_sweep_axes_are_the_training_specs_fields() {
-    let doc: serde_json::Value =
-        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
-    let listed = doc["components"]["schemas"]["SweepRequest"]["properties"]["axes"]["properties"]
+    let schemas = schemas();
+    let listed = schemas["SweepRequest"]["properties"]["axes"]["properties"]
         .as_object()
         .expect("axes");
     let mut listed: Vec<&str> = listed.keys().map(String::as_str).collect();
@@ -62,8 +60,6 @@ fn the_documents_sweep_axes_are_the_training_specs_fields() {
 
 #[test]
 fn the_documents_task_and_topology_enums_are_the_catalogs() {
-    let doc: serde_json::Value =
-        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
     let catalog = crm_api::Catalog::builtin().expect("catalog");
     let ids: Vec<String> = catalog.tasks.iter().map(|t| t.id.clone()).collect();
     let mut topologies = vec!["task".to_string(), "auto".to_string()];
@@ -75,7 +71,7 @@ fn the_documents_task_and_topology_enums_are_the_catalogs() {
             .filter_map(|s| s.as_str().map(String::from))
             .collect()
     };
-    let schemas = &doc["components"]["schemas"];
+    let schemas = &schemas();
     let flat = ["TrainPpoRequest", "TrainOtherRequest", "EvalFlatRequest"];
     let documents = ["TrainPpoDocument", "TrainOtherDocument", "EvalDocument"];
     let envs = documents.map(|name| (name, &schemas[name]["properties"]["env"]["properties"]));
@@ -126,9 +122,7 @@ fn the_documents_task_and_topology_enums_are_the_catalogs() {
 
 #[test]
 fn the_documents_learner_settings_are_the_configs_fields() {
-    let doc: serde_json::Value =
-        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
-    let schemas = &doc["components"]["schemas"];
+    let schemas = &schemas();
     use crm_api::fields::field_names;
     assert_eq!(
         keys(&schemas["PpoConfig"]["properties"]),
@@ -153,9 +147,7 @@ fn the_documents_learner_settings_are_the_configs_fields() {
 /// expects a refusal wherever it does not.
 #[test]
 fn the_documents_nullable_train_fields_are_the_ones_the_server_accepts_as_null() {
-    let doc: serde_json::Value =
-        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
-    let schemas = &doc["components"]["schemas"];
+    let schemas = &schemas();
     for name in ["TrainPpoRequest", "TrainOtherRequest", "SweepBase"] {
         let properties = schemas[name]["properties"].as_object().expect("properties");
         assert!(properties.contains_key("fine_tune"), "{name}");
@@ -181,9 +173,7 @@ fn the_documents_nullable_train_fields_are_the_ones_the_server_accepts_as_null()
 fn the_documents_experiment_parts_are_the_types_fields() {
     use crm_api::document::{AlgorithmSpec, EnvSpec, EvalRunSpec, RunSpec};
     use crm_api::fields::field_names;
-    let doc: serde_json::Value =
-        serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON");
-    let schemas = &doc["components"]["schemas"];
+    let schemas = &schemas();
     for name in ["TrainPpoDocument", "TrainOtherDocument", "EvalDocument"] {
         let parts = &schemas[name]["properties"];
         assert_eq!(
@@ -229,4 +219,14 @@ fn fields(names: &[&str]) -> Vec<String> {
     let mut names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
     names.sort();
     names
+}
+
+/// The OpenAPI document the coordinator serves, parsed.
+fn document() -> serde_json::Value {
+    serde_json::from_str(crm_server::api::OPENAPI).expect("openapi.json is JSON")
+}
+
+/// The document's component schemas.
+fn schemas() -> serde_json::Value {
+    document()["components"]["schemas"].take()
 }

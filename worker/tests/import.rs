@@ -6,6 +6,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod common;
+
 fn crm(args: &[&str]) -> (i32, String, String) {
     let output = Command::new(env!("CARGO_BIN_EXE_crm"))
         .args(args)
@@ -21,13 +23,7 @@ fn crm(args: &[&str]) -> (i32, String, String) {
 
 fn standin(root: &Path, name: &str) -> PathBuf {
     let dir = root.join(name);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/make-dexmobile-standin");
-    let status = Command::new("python3")
-        .arg(&script)
-        .arg(&dir)
-        .status()
-        .expect("python3 runs scripts/make-dexmobile-standin");
-    assert!(status.success());
+    common::scripted("make-dexmobile-standin", &dir);
     dir
 }
 

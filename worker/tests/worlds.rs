@@ -6,6 +6,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod common;
+
 /// Runs `crm` with `CRM_ASSETS` pointing at the test world's assets.
 fn crm(root: &Path, args: &[&str]) -> (i32, String, String) {
     let output = Command::new(env!("CARGO_BIN_EXE_crm"))
@@ -24,13 +26,7 @@ fn crm(root: &Path, args: &[&str]) -> (i32, String, String) {
 fn test_world(tag: &str) -> PathBuf {
     let root = std::env::temp_dir().join(format!("crm-cli-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/make-test-world");
-    let status = Command::new("python3")
-        .arg(&script)
-        .arg(&root)
-        .status()
-        .expect("python3 runs scripts/make-test-world");
-    assert!(status.success());
+    common::scripted("make-test-world", &root);
     root
 }
 

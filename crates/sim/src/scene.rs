@@ -39,13 +39,19 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Torque (N m) of `contacts` about the object's twist axis: its vertical through its
-    /// start position, the hinge of an anchored object.
-    pub fn twist_torque(&self, contacts: &ContactMetrics) -> f32 {
-        contacts.torque_about(
+    /// The object's twist axis, a point on it and its direction: the object's vertical
+    /// through its start position, the hinge of an anchored object.
+    pub fn twist_axis(&self) -> (Vec3, Vec3) {
+        (
             self.object_start.translation,
             self.object_start.rotation * Vec3::Z,
         )
+    }
+
+    /// Torque (N m) of `contacts` about the object's twist axis ([`Scene::twist_axis`]).
+    pub fn twist_torque(&self, contacts: &ContactMetrics) -> f32 {
+        let (point, axis) = self.twist_axis();
+        contacts.torque_about(point, axis)
     }
 }
 

@@ -6,25 +6,17 @@
 //! the file (and the CSV's line and column) with nothing written.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use grasp_sim::assets::Assets;
 use grasp_sim::hand::Hand;
 use grasp_sim::import::dexmobile::{Options, import};
 use grasp_sim::{GraspEnv, SimConfig, World};
 
+mod common;
+
 /// A fresh stand-in under the temporary folder.
 fn standin(tag: &str) -> PathBuf {
-    let root = std::env::temp_dir().join(format!("crm-standin-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make-dexmobile-standin");
-    let status = Command::new("python3")
-        .arg(&script)
-        .arg(&root)
-        .status()
-        .expect("python3 runs scripts/make-dexmobile-standin");
-    assert!(status.success(), "make-dexmobile-standin failed");
-    root
+    common::scripted("make-dexmobile-standin", &format!("crm-standin-{tag}"))
 }
 
 /// The index of the hand's joint `name` in its model.

@@ -9,7 +9,7 @@
 use rapier3d::prelude::Vec3;
 
 use super::GraspEnv;
-use super::script::{FINGER_SCALE, GRASP_SCALE, objective_action, twist_spin};
+use super::script::{FINGER_SCALE, GRASP_SCALE, grip_and_limit, objective_action, twist_spin};
 use crate::benchmark::{Objective, Topology};
 use crate::config::Protocol;
 use crate::error::Result;
@@ -104,11 +104,7 @@ impl GraspEnv {
         if self.objective() == Objective::Twist {
             // A twist turns the object by the fingers' friction: grip at least TWIST_GRIP of
             // the fragility limit, however lightly the grasp was handed over.
-            let limit = self
-                .benchmark
-                .object_of(self.task())
-                .fragility
-                .grasp_force_limit();
+            let (_, limit) = grip_and_limit(self);
             hold = hold.max(TWIST_GRIP * limit);
         }
         let hold_objective = self.objective().is_hold();

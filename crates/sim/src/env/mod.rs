@@ -418,18 +418,20 @@ impl GraspEnv {
         let target = (start + delta).clamp(Vec3::new(-0.4, -0.4, 0.02), Vec3::new(0.4, 0.4, 0.6));
         let substeps = self.config.substeps.max(1);
         let object = scene.object;
-        let pivot = scene.object_start.translation;
-        let axis = scene.object_start.rotation * Vec3::Z;
-        let mount_rotation = scene.hand.mount_pose(&scene.world).rotation;
+        let (pivot, axis) = scene.twist_axis();
+        // The mount's turn starts from its orientation now (read only when it turns).
+        let spun_from = (spin != 0.0).then(|| scene.hand.mount_pose(&scene.world).rotation);
         // The mount's pose after the share `alpha` of this step: moved towards `target`,
         // then turned by that share of `spin` about the twist axis.
         let pose_at = |alpha: f32| {
             let moved = start.lerp(target, alpha);
-            if spin == 0.0 {
-                return (moved, None);
+            match spun_from {
+                None => (moved, None),
+                Some(rotation) => {
+                    let turn = Rotation::from_axis_angle(axis, spin * alpha);
+                    (pivot + turn * (moved - pivot), Some(turn * rotation))
+                }
             }
-            let turn = Rotation::from_axis_angle(axis, spin * alpha);
-            (pivot + turn * (moved - pivot), Some(turn * mount_rotation))
         };
         self.mount_target = pose_at(1.0).0;
         // In the approach the wrist keeps the task's orientation on the object as it moves

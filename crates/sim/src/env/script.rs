@@ -43,21 +43,40 @@ pub fn twist_spin(env: &GraspEnv) -> f32 {
     let Some(scene) = env.scene() else {
         return 0.0;
     };
+    let (grip, limit) = grip_and_limit(env);
+    let speed = twist_pace(near_limit(grip, limit)) * GRASP_SCALE;
+    let (pivot, axis) = scene.twist_axis();
+    let arm = scene.hand.grasp_point(&scene.world) - pivot;
+    let radius = (arm - arm.dot(axis) * axis).length().max(TWIST_MIN_RADIUS);
+    env.task().required.unwrap_or(1.0).signum() * speed / radius
+}
+
+/// The last control step's grip and the task's object's fragility limit (N).
+pub(super) fn grip_and_limit(env: &GraspEnv) -> (f32, f32) {
     let limit = env
         .benchmark()
         .object_of(env.task())
         .fragility
         .grasp_force_limit();
-    let near_limit = env.observation_parts().grip * limit > 0.8 * limit;
-    let speed = if near_limit {
+    (env.observation_parts().grip * limit, limit)
+}
+
+/// Whether a grip is near the fragility limit: the fingers open a little and a twist backs
+/// off.
+fn near_limit(grip: f32, limit: f32) -> bool {
+    grip > 0.8 * limit
+}
+
+/// A twist's pace along its tangent, in grasp steps: it pushes, and backs off when the grip
+/// nears the fragility limit. A push on an object that resists it squeezes the fingers, and
+/// pushing on would crush the object before the test's time. (Holding still once the torque
+/// is there lets it relax under a part that turns.)
+fn twist_pace(near_limit: bool) -> f32 {
+    if near_limit {
         -TWIST_BACK_OFF
     } else {
         TWIST_PUSH
-    } * GRASP_SCALE;
-    let axis = scene.object_start.rotation * Vec3::Z;
-    let arm = scene.hand.grasp_point(&scene.world) - scene.object_start.translation;
-    let radius = (arm - arm.dot(axis) * axis).length().max(TWIST_MIN_RADIUS);
-    env.task().required.unwrap_or(1.0).signum() * speed / radius
+    }
 }
 
 fn unit(value: f32, scale: f32) -> f32 {
@@ -77,14 +96,9 @@ pub fn objective_action(env: &GraspEnv, hold: f32) -> Vec<f32> {
     let parts = env.observation_parts();
     let task = env.task();
     let shape = env.hand_shape();
-    let limit = env
-        .benchmark()
-        .object_of(task)
-        .fragility
-        .grasp_force_limit();
-    let grip = parts.grip * limit;
+    let (grip, limit) = grip_and_limit(env);
     // Near the fragility limit the fingers open, and a twist's palm backs off.
-    let near_limit = grip > 0.8 * limit;
+    let near_limit = near_limit(grip, limit);
     // Keep the grip under the fragility limit and near the grip to hold.
     for finger in 0..5 {
         if shape[finger].active && task.objective != Objective::Press {
@@ -118,15 +132,8 @@ pub fn objective_action(env: &GraspEnv, hold: f32) -> Vec<f32> {
             };
         }
         Objective::Twist => {
-            // Push along the tangent, and back off when the grip nears the fragility limit:
-            // a push on an object that resists it squeezes the fingers, and pushing on would
-            // crush the object before the test's time. (Holding still once the torque is
-            // there lets it relax under a part that turns.)
-            let speed = if near_limit {
-                -TWIST_BACK_OFF
-            } else {
-                TWIST_PUSH
-            };
+            // Push along the tangent at the twist's pace.
+            let speed = twist_pace(near_limit);
             for axis in 0..3 {
                 action[axis] = speed * motion[axis];
             }

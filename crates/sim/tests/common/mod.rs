@@ -1,5 +1,6 @@
-//! The test world the integration tests share: `scripts/make-test-world` writes it (a URDF
-//! hand we made, its profile, a four-finger variant) into a fresh folder.
+//! What the integration tests share: the test world, which `scripts/make-test-world` writes
+//! (a URDF hand we made, its profile, a four-finger variant) into a fresh folder, and any
+//! other folder a repository script writes.
 
 // Each test crate includes this module and uses part of it.
 #![allow(dead_code)]
@@ -12,15 +13,23 @@ use grasp_sim::assets::Assets;
 
 /// A fresh copy of the test world under the temporary folder.
 pub fn test_world(tag: &str) -> PathBuf {
-    let root = std::env::temp_dir().join(format!("crm-test-world-{tag}-{}", std::process::id()));
+    scripted("make-test-world", &format!("crm-test-world-{tag}"))
+}
+
+/// A fresh folder `name` (with the process id) under the temporary folder, written by the
+/// repository's `scripts/SCRIPT`.
+pub fn scripted(script: &str, name: &str) -> PathBuf {
+    let root = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make-test-world");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scripts")
+        .join(script);
     let status = Command::new("python3")
-        .arg(&script)
+        .arg(&path)
         .arg(&root)
         .status()
-        .expect("python3 runs scripts/make-test-world");
-    assert!(status.success(), "make-test-world failed");
+        .unwrap_or_else(|e| panic!("python3 runs scripts/{script}: {e}"));
+    assert!(status.success(), "{script} failed");
     root
 }
 
