@@ -233,20 +233,21 @@ fn a_sweep_is_validated_whole_runs_its_grid_and_aggregates_table_one() {
     );
 }
 
-/// `crm results`' cell: `success ± std (length ± std)`.
-fn cell(stats: &Value) -> String {
-    let (s, l) = (&stats["success"], &stats["length"]);
-    format!(
-        "{:.2} ± {:.2} ({:.0} ± {:.0})",
-        s["mean"].as_f64().expect("mean"),
-        s["std"].as_f64().expect("std"),
-        l["mean"].as_f64().expect("mean"),
-        l["std"].as_f64().expect("std")
-    )
+/// `crm results`' cell: `success ± std (length ± std)` over the runs' (success, length).
+fn cell(runs: &[(f64, f64)]) -> String {
+    let stats = |values: Vec<f64>| {
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+        (mean, std)
+    };
+    let (sm, ss) = stats(runs.iter().map(|r| r.0).collect());
+    let (lm, ls) = stats(runs.iter().map(|r| r.1).collect());
+    format!("{sm:.2} ± {ss:.2} ({lm:.0} ± {ls:.0})")
 }
 
 #[test]
-fn crm_results_runs_its_study_as_a_sweep_and_writes_the_sweeps_numbers() {
+fn crm_results_runs_its_study_as_sweeps_and_writes_the_evaluations_numbers() {
     let data = TempDir::new("results");
     let out = TempDir::new("results-out");
     let server = start_server(&data.0, &["--token", TOKEN]);
@@ -276,6 +277,8 @@ fn crm_results_runs_its_study_as_a_sweep_and_writes_the_sweeps_numbers() {
             "mouse-press",
             "--envs",
             "1",
+            "--reps",
+            "200",
         ])
         .arg("--out")
         .arg(&out.0)
@@ -287,20 +290,33 @@ fn crm_results_runs_its_study_as_a_sweep_and_writes_the_sweeps_numbers() {
         String::from_utf8_lossy(&run.stderr)
     );
     let text = std::fs::read_to_string(out.0.join("RESULTS.md")).expect("RESULTS.md");
-    for png in ["success.png", "episode_length.png"] {
-        let bytes = std::fs::read(out.0.join("results").join(png)).expect("a plot");
+    for png in ["success.png", "episode_length.png", "profile.png"] {
+        let bytes = std::fs::read(out.0.join("results/builtin").join(png)).expect("a plot");
         assert!(bytes.starts_with(b"\x89PNG"), "{png}");
     }
-    // The file names its sweep; its numbers are the sweep's, cell by cell.
-    let id = text
-        .split("(sweep ")
-        .nth(1)
-        .and_then(|rest| rest.split_whitespace().next())
-        .and_then(|n| n.parse::<i64>().ok())
-        .expect("the sweep id in RESULTS.md");
-    let sweep = get(&addr, &format!("/api/v1/sweeps/{id}"));
-    let rows = sweep["table"]["rows"].as_array().expect("rows");
-    assert_eq!(rows.len(), 2);
+    // The study ran as one sweep per seed, named after it; its numbers are the sweeps'
+    // sampled evaluations, cell by cell.
+    let sweeps = get(&addr, "/api/v1/sweeps");
+    let ids: Vec<i64> = sweeps["sweeps"]
+        .as_array()
+        .expect("sweeps")
+        .iter()
+        .filter(|s| s["name"] == "crm results: builtin")
+        .filter_map(|s| s["id"].as_i64())
+        .collect();
+    assert_eq!(ids.len(), 2, "{sweeps}");
+    let mut evals: Vec<(String, Value)> = Vec::new();
+    for id in ids {
+        let sweep = get(&addr, &format!("/api/v1/sweeps/{id}"));
+        for job in sweep["jobs"].as_array().expect("jobs") {
+            if job["kind"] == "eval" {
+                assert_eq!(job["state"], "succeeded", "{job}");
+                let algorithm = job["algorithm"].as_str().expect("algorithm").to_string();
+                evals.push((algorithm, job["result"].clone()));
+            }
+        }
+    }
+    assert_eq!(evals.len(), 4);
     let line = |objective: &str| -> Vec<String> {
         let line = text
             .lines()
@@ -310,20 +326,26 @@ fn crm_results_runs_its_study_as_a_sweep_and_writes_the_sweeps_numbers() {
             .map(|c| c.trim().trim_matches('*').to_string())
             .collect()
     };
-    for (objective, pick) in [("overall", None), ("press", Some("press"))] {
+    for objective in ["overall", "press"] {
         let cells = line(objective);
-        for (k, row) in rows.iter().enumerate() {
-            let stats = match pick {
-                None => &row["overall"],
-                Some(o) => &row["per_objective"][o],
-            };
+        for (k, algorithm) in ["crm-ppo", "ippo"].iter().enumerate() {
+            let runs: Vec<(f64, f64)> = evals
+                .iter()
+                .filter(|(a, _)| a == algorithm)
+                .map(|(_, r)| {
+                    let row = if objective == "overall" {
+                        r
+                    } else {
+                        &r["per_objective"][objective]
+                    };
+                    (
+                        row["success_rate"].as_f64().expect("success"),
+                        row["mean_episode_length"].as_f64().expect("length"),
+                    )
+                })
+                .collect();
             // | objective | ours | paper | ours | paper |
-            assert_eq!(
-                cells[2 + 2 * k],
-                cell(stats),
-                "{objective}, {}",
-                row["label"]
-            );
+            assert_eq!(cells[2 + 2 * k], cell(&runs), "{objective}, {algorithm}");
         }
     }
     assert!(

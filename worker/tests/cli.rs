@@ -466,8 +466,8 @@ fn results_writes_table_i_and_png_curves() {
     assert!(table.contains("| press |"), "{table}");
     assert!(table.contains("| overall |"), "{table}");
     assert!(table.contains("256 environment steps per run"), "{table}");
-    for plot in ["success.png", "episode_length.png"] {
-        let bytes = std::fs::read(out.join("results").join(plot)).expect("plot");
+    for plot in ["success.png", "episode_length.png", "profile.png"] {
+        let bytes = std::fs::read(out.join("results/builtin").join(plot)).expect("plot");
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{plot} is a PNG");
     }
     // Without --coordinator, the study ran on a coordinator started here, with its store.

@@ -54,6 +54,11 @@ pub struct CheckpointHeader {
     /// (see `lineage.rs`). Empty in checkpoints written before headers kept it.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lineage: Vec<LineageStage>,
+    /// The whole training state of an unfinished run, so that a resume is the same run
+    /// (`state.rs`; its arrays are the file's `state.*` tensors). Absent in a finished run's
+    /// checkpoint, in CRM-SAC's and in those written before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub state: Option<crate::state::RunState>,
 }
 
 /// What CRM-SAC checkpoints say in `activation` (older ones, with `tanh`, say nothing).
@@ -81,7 +86,25 @@ fn refuse(path: &Path, message: impl Into<String>) -> Error {
 impl Checkpoint {
     /// Writes the networks, their observation statistics and the header to `path`.
     pub fn save(net: &ActorCritic, header: &CheckpointHeader, path: &Path) -> Result<()> {
-        Self::save_normalized(net.params(), net.norm(), header, path)
+        Self::save_normalized(net.params(), net.norm(), header, &[], path)
+    }
+
+    /// [`Self::save`] with more tensors beside the network's (a run's training state,
+    /// `state.rs`).
+    pub fn save_with(
+        net: &ActorCritic,
+        header: &CheckpointHeader,
+        extra: &[(String, candle_core::Tensor)],
+        path: &Path,
+    ) -> Result<()> {
+        Self::save_normalized(net.params(), net.norm(), header, extra, path)
+    }
+
+    /// Every tensor of a checkpoint by name (a run's training state reads its `state.*`).
+    pub fn tensors(path: &Path) -> Result<HashMap<String, candle_core::Tensor>> {
+        let bytes = std::fs::read(path).map_err(|e| refuse(path, format!("cannot read: {e}")))?;
+        candle_core::safetensors::load_buffer(&bytes, &candle_core::Device::Cpu)
+            .map_err(|e| refuse(path, format!("cannot read tensors: {e}")))
     }
 
     /// Writes CRM-SAC's networks, their observation statistics and the header to `path`.
@@ -94,7 +117,7 @@ impl Checkpoint {
             activation: Some(SAC_ACTIVATION.into()),
             ..header.clone()
         };
-        Self::save_normalized(&nets.params, nets.norm(), &header, path)
+        Self::save_normalized(&nets.params, nets.norm(), &header, &[], path)
     }
 
     /// Writes named parameters with the observation statistics they were trained with.
@@ -102,6 +125,7 @@ impl Checkpoint {
         params: &[(String, candle_core::Var)],
         norm: &ObsNorm,
         header: &CheckpointHeader,
+        extra: &[(String, candle_core::Tensor)],
         path: &Path,
     ) -> Result<()> {
         let (mean, var, count) = norm.to_parts();
@@ -121,6 +145,7 @@ impl Checkpoint {
         Self::write(
             named(params)
                 .chain(stats.iter().map(|(name, t)| (*name, t)))
+                .chain(extra.iter().map(|(name, t)| (name.as_str(), t)))
                 .collect(),
             header,
             path,
@@ -355,6 +380,7 @@ mod tests {
                     Some(serde_json::json!({"demo_steps": 120, "epochs": 3})),
                 ),
             ],
+            state: None,
         }
     }
 
@@ -528,6 +554,7 @@ mod tests {
             world: None,
             world_hash: None,
             lineage: Vec::new(),
+            state: None,
         };
         let path = temp("sac.safetensors");
         Checkpoint::save_sac(&nets, &header, &path).expect("save");
@@ -555,7 +582,7 @@ mod tests {
         );
         // A checkpoint from before CRM-SAC's ReLU layers says nothing of them: refused.
         let tanh = temp("sac-tanh.safetensors");
-        Checkpoint::save_normalized(&nets.params, nets.norm(), &header, &tanh).expect("write");
+        Checkpoint::save_normalized(&nets.params, nets.norm(), &header, &[], &tanh).expect("write");
         let err = Checkpoint::load_sac(&tanh, "abc123", "grasp-sim/test")
             .err()
             .map(|e| e.to_string())

@@ -38,6 +38,24 @@ impl TaskCurriculum {
         }
     }
 
+    /// Each task's recent outcomes, oldest first (a checkpoint of the training state keeps
+    /// them).
+    pub fn outcomes(&self) -> Vec<Vec<bool>> {
+        self.outcomes
+            .iter()
+            .map(|list| list.iter().copied().collect())
+            .collect()
+    }
+
+    /// Goes on with these outcomes per task (extra tasks ignored, the newest `window` kept).
+    pub fn restore(&mut self, outcomes: &[Vec<bool>]) {
+        for (list, saved) in self.outcomes.iter_mut().zip(outcomes) {
+            list.clear();
+            let skip = saved.len().saturating_sub(self.window);
+            list.extend(&saved[skip..]);
+        }
+    }
+
     /// Records an episode of task `task` (ignored when out of range).
     pub fn record(&mut self, task: usize, success: bool) {
         if let Some(list) = self.outcomes.get_mut(task) {

@@ -32,6 +32,18 @@ impl EarlyStop {
         self.recent.len() == self.window && self.success_rate() >= self.threshold
     }
 
+    /// The window's outcomes, oldest first (a checkpoint of the training state keeps them).
+    pub fn outcomes(&self) -> Vec<bool> {
+        self.recent.iter().copied().collect()
+    }
+
+    /// Goes on with these outcomes in the window (the newest `window` of them).
+    pub fn restore(&mut self, outcomes: &[bool]) {
+        self.recent.clear();
+        let skip = outcomes.len().saturating_sub(self.window);
+        self.recent.extend(&outcomes[skip..]);
+    }
+
     /// Success rate over the episodes in the window so far.
     pub fn success_rate(&self) -> f32 {
         if self.recent.is_empty() {

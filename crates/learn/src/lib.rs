@@ -22,6 +22,7 @@ pub mod optim;
 pub mod ppo;
 pub mod rollout;
 pub mod sac;
+pub mod state;
 pub mod topology;
 
 pub use checkpoint::{Checkpoint, CheckpointHeader};
@@ -34,7 +35,7 @@ pub use lineage::LineageStage;
 pub use network::{ActorCritic, Layout};
 pub use noise::Noise;
 pub use normalize::{ObsNorm, RewardScaler};
-pub use ppo::{Ppo, UpdateEngine, UpdateStats, UpdateTiming};
-pub use rollout::{Actor, Episode, Rollout, VecEnv};
+pub use ppo::{Ppo, PpoState, UpdateEngine, UpdateStats, UpdateTiming};
+pub use rollout::{Actor, EnvState, Episode, Rollout, VecEnv};
 pub use sac::{Sac, SacNets, SacStats};
 pub use topology::{Example, TopologyNet};

@@ -11,6 +11,11 @@ impl Noise {
         Self(seed)
     }
 
+    /// The generator's whole state: `Noise::new(state)` goes on from here.
+    pub fn state(&self) -> u64 {
+        self.0
+    }
+
     pub(crate) fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;

@@ -21,7 +21,7 @@ pub const CLIP_OBS: f32 = 10.0;
 
 /// Running mean and variance of a vector of features (Chan et al.'s parallel update, as SB3's
 /// `RunningMeanStd.update_from_moments`).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RunningMeanStd {
     pub count: f64,
     pub mean: Vec<f64>,
@@ -199,6 +199,18 @@ impl RewardScaler {
         if episode_ended {
             self.returns[env] = 0.0;
         }
+    }
+
+    /// The running discounted return of each environment and the statistics of the returns
+    /// seen: everything the next factor depends on.
+    pub fn state(&self) -> (Vec<f64>, RunningMeanStd) {
+        (self.returns.clone(), self.stats.clone())
+    }
+
+    /// Goes on from a [`Self::state`].
+    pub fn restore(&mut self, returns: Vec<f64>, stats: RunningMeanStd) {
+        self.returns = returns;
+        self.stats = stats;
     }
 
     /// The factor every reward is multiplied by: `1 / sqrt(var(return) + eps)`.

@@ -122,6 +122,32 @@ impl Adam {
         Ok(norms)
     }
 
+    /// The step count and the moments (one list per parameter), for a checkpoint of the whole
+    /// training state.
+    pub fn state(&self) -> (i32, &[Vec<f32>], &[Vec<f32>]) {
+        (self.t, &self.m, &self.v)
+    }
+
+    /// Sets the step count and the moments from a checkpoint; each list must have its
+    /// parameter's size.
+    pub fn restore(&mut self, t: i32, m: Vec<Vec<f32>>, v: Vec<Vec<f32>>) -> Result<()> {
+        let sizes = |lists: &[Vec<f32>]| lists.iter().map(Vec::len).collect::<Vec<_>>();
+        let expected = sizes(&self.m);
+        for (what, lists) in [("Adam's first moments", &m), ("Adam's second moments", &v)] {
+            if sizes(lists) != expected {
+                return Err(crate::error::Error::Config {
+                    field: "optimizer",
+                    message: format!(
+                        "{what} have sizes {:?}, the parameters {expected:?}",
+                        sizes(lists)
+                    ),
+                });
+            }
+        }
+        (self.t, self.m, self.v) = (t, m, v);
+        Ok(())
+    }
+
     /// Counts one step and returns its bias-corrected coefficients, for an update that keeps
     /// its parameters and moments on the host (`fused`).
     pub(crate) fn next_step(&mut self) -> AdamStep {

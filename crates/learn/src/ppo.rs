@@ -57,6 +57,19 @@ pub struct UpdateTiming {
     pub bookkeeping: f64,
 }
 
+/// What a PPO learner carries from one update to the next besides its weights and
+/// observation statistics: Adam's step and moments, the reward scaler (each environment's
+/// running return and the returns' statistics) and the minibatch shuffles' generator.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PpoState {
+    pub adam_step: i32,
+    pub adam_m: Vec<Vec<f32>>,
+    pub adam_v: Vec<Vec<f32>>,
+    pub noise: u64,
+    pub returns: Vec<f64>,
+    pub return_stats: crate::normalize::RunningMeanStd,
+}
+
 /// The learner: networks, optimizer, reward scaler and its noise source.
 pub struct Ppo {
     pub net: ActorCritic,
@@ -136,6 +149,29 @@ impl Ppo {
             mine.set(theirs.as_tensor())?;
         }
         self.net.set_norm(other.norm().clone())?;
+        Ok(())
+    }
+
+    /// Everything but the weights that the next update depends on ([`PpoState`]).
+    pub fn state(&self) -> PpoState {
+        let (adam_step, m, v) = self.optimizer.state();
+        let (returns, return_stats) = self.scaler.state();
+        PpoState {
+            adam_step,
+            adam_m: m.to_vec(),
+            adam_v: v.to_vec(),
+            noise: self.noise.state(),
+            returns,
+            return_stats,
+        }
+    }
+
+    /// Goes on from a [`PpoState`] (with the weights loaded by [`Self::load_weights`]).
+    pub fn restore(&mut self, state: PpoState) -> Result<()> {
+        self.optimizer
+            .restore(state.adam_step, state.adam_m, state.adam_v)?;
+        self.scaler.restore(state.returns, state.return_stats);
+        self.noise = Noise::new(state.noise);
         Ok(())
     }
 

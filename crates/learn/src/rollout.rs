@@ -93,6 +93,18 @@ struct Slot<E> {
     buffer: Rollout,
     /// This environment's policy noise, for learners that act one environment at a time.
     noise: Noise,
+    /// The running episode's actions: replayed from its seed, they put the environment back
+    /// where it is ([`VecEnv::restore`]).
+    actions: Vec<Vec<f32>>,
+}
+
+/// Where one environment stands in its stream, as a checkpoint keeps it: its episode count
+/// (its next reset's seed), its noise generator and the running episode's actions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvState {
+    pub episode: u64,
+    pub noise: u64,
+    pub actions: Vec<Vec<f32>>,
 }
 
 impl<E: crm::Environment> Slot<E> {
@@ -108,6 +120,7 @@ impl<E: crm::Environment> Slot<E> {
         mask: Vec<f32>,
     ) -> Result<()> {
         let step = self.env.step(&action).map_err(env_error)?;
+        self.actions.push(action.clone());
         self.episode_intra += step.intra_reward;
         self.episode_transition += step.transition_reward;
         self.episode_length += 1;
@@ -140,9 +153,45 @@ impl<E: crm::Environment> Slot<E> {
             self.episode_intra = 0.0;
             self.episode_transition = 0.0;
             self.episode_length = 0;
+            self.actions.clear();
             let seed = episode_seed(base_seed, k, self.episode);
             (self.stage, self.state) = self.env.reset(seed).map_err(env_error)?;
         } else {
+            (self.stage, self.state) = (step.stage, step.abstract_state);
+        }
+        Ok(())
+    }
+
+    /// Puts the environment back at `state`: its episode's reset, then its actions again
+    /// (the environment is deterministic per seed, so it arrives where it was, the machine's
+    /// stage and history included), with the episode's returns summed as they were.
+    fn replay(&mut self, k: usize, base_seed: u64, state: &EnvState) -> Result<()> {
+        self.episode = state.episode;
+        self.noise = Noise::new(state.noise);
+        (self.stage, self.state) = self
+            .env
+            .reset(episode_seed(base_seed, k, self.episode))
+            .map_err(env_error)?;
+        (
+            self.episode_intra,
+            self.episode_transition,
+            self.episode_length,
+        ) = (0.0, 0.0, 0);
+        self.actions.clear();
+        for (n, action) in state.actions.iter().enumerate() {
+            let step = self.env.step(action).map_err(env_error)?;
+            if step.done || step.truncated {
+                return Err(Error::Env(format!(
+                    "environment {k}'s episode ended after {} of the {} steps it replays: the \
+                     checkpoint was made by another build or on another CPU type",
+                    n + 1,
+                    state.actions.len()
+                )));
+            }
+            self.episode_intra += step.intra_reward;
+            self.episode_transition += step.transition_reward;
+            self.episode_length += 1;
+            self.actions.push(action.clone());
             (self.stage, self.state) = (step.stage, step.abstract_state);
         }
         Ok(())
@@ -223,6 +272,7 @@ impl<E: crm::Environment + Send> VecEnv<E> {
                     episode_length: 0,
                     buffer: Rollout::default(),
                     noise: Noise::new(episode_seed(base_seed, k, u64::MAX)),
+                    actions: Vec::new(),
                 })
             })
             .collect::<Result<Vec<_>>>()?;
@@ -240,6 +290,41 @@ impl<E: crm::Environment + Send> VecEnv<E> {
     /// The environments, in order (to change settings that apply from their next reset).
     pub fn envs_mut(&mut self) -> impl Iterator<Item = &mut crm::CrmEnv<E>> {
         self.slots.iter_mut().map(|s| &mut s.env)
+    }
+
+    /// The environments, in order.
+    pub fn envs(&self) -> impl Iterator<Item = &crm::CrmEnv<E>> {
+        self.slots.iter().map(|s| &s.env)
+    }
+
+    /// Where each environment stands (between collections: nothing is buffered then).
+    pub fn states(&self) -> Vec<EnvState> {
+        self.slots
+            .iter()
+            .map(|s| EnvState {
+                episode: s.episode,
+                noise: s.noise.state(),
+                actions: s.actions.clone(),
+            })
+            .collect()
+    }
+
+    /// Puts every environment back where [`Self::states`] found it (one state per
+    /// environment), replaying the running episodes in parallel.
+    pub fn restore(&mut self, states: &[EnvState]) -> Result<()> {
+        if states.len() != self.slots.len() {
+            return Err(Error::Length {
+                what: "environment states",
+                expected: self.slots.len(),
+                got: states.len(),
+            });
+        }
+        let base_seed = self.base_seed;
+        self.slots
+            .par_iter_mut()
+            .zip(states.par_iter())
+            .enumerate()
+            .try_for_each(|(k, (slot, state))| slot.replay(k, base_seed, state))
     }
 
     /// Steps every environment `steps_per_env` times with the policy of `actor`.

@@ -1,10 +1,13 @@
 //! A training run: vectorized rollouts and learner updates (PPO, or SAC for crm-sac) inside
 //! the grasping CRM, one iteration at a time so that a caller (the CLI's progress bar, the
-//! service worker's heartbeat) can report between them and save checkpoints. A run can start
-//! from a checkpoint of the same machine: it keeps the steps already trained (so the
-//! learning-rate steps stay where they were) and reseeds its environments and noise from
-//! (seed, steps), so a resumed run is reproducible but not the same as the uninterrupted one.
-//! A resumed SAC run starts with an empty replay buffer.
+//! service worker's heartbeat) can report between them and save checkpoints. A PPO-family
+//! run's checkpoint holds its whole training state until the run finishes
+//! (`crm_learn::state`), and a run resumed from one is the same run: the same metrics and the
+//! same final weights, bit for bit, as if it had never stopped (on the same build and CPU
+//! type). From a checkpoint without that state (CRM-SAC's, or one written before) a run keeps
+//! the steps already trained (so the learning-rate steps stay where they were) and reseeds
+//! its environments and noise from (seed, steps): reproducible, but not the uninterrupted
+//! run; a resumed SAC run starts with an empty replay buffer.
 
 use std::path::Path;
 use std::time::Instant;
@@ -12,6 +15,7 @@ use std::time::Instant;
 use crm_api::{Algorithm, Iteration, TrainSpec};
 use crm_learn::checkpoint::FORMAT;
 use crm_learn::rollout::Episode;
+use crm_learn::state::{self as run_state, EnvRecord, PpoRecord, RunState};
 use crm_learn::{
     Checkpoint, CheckpointHeader, EarlyStop, Layout, LineageStage, Ppo, Sac, TaskCurriculum, VecEnv,
 };
@@ -91,6 +95,8 @@ pub struct Trainer {
     parent_sha256: Option<String>,
     command: Option<Vec<String>>,
     imitation: Option<serde_json::Value>,
+    /// The machine the resumed checkpoint's state was made on, when the run went on from one.
+    resumed_state_from: Option<String>,
 }
 
 impl Trainer {
@@ -118,6 +124,8 @@ impl Trainer {
         let mut start_steps = 0;
         let mut resume_ppo = None;
         let mut resume_sac = None;
+        // A resume from a checkpoint that kept the whole training state: (state, tensors).
+        let mut exact = None;
         let (mut lineage, mut parent_sha256) = (Vec::new(), None);
         if let Some(init) = init {
             let path = init.path();
@@ -136,6 +144,9 @@ impl Trainer {
                 Init::Resume(_) => {
                     crate::check_world(&header, env.world()?, path)?;
                     start_steps = header.steps;
+                    if let Some(state) = header.state.clone() {
+                        exact = Some((state, Checkpoint::tensors(path)?));
+                    }
                 }
                 // Another world's weights: `Checkpoint::load` below still asks for the same
                 // machine (spec hash) and observation layout (`ENV_VERSION`).
@@ -148,7 +159,15 @@ impl Trainer {
                 resume_ppo = Some(Checkpoint::load(path, &spec_hash, grasp_sim::ENV_VERSION)?.0);
             }
         }
-        let seed = if start_steps == 0 {
+        // The state replays one episode per environment: with another number of environments
+        // the run goes on from the weights as from an older checkpoint.
+        if exact
+            .as_ref()
+            .is_some_and(|(state, _)| state.envs.len() != env_count)
+        {
+            exact = None;
+        }
+        let seed = if start_steps == 0 || exact.is_some() {
             spec.seed
         } else {
             spec.seed ^ start_steps.wrapping_mul(0xD1B5_4A32_D192_ED03)
@@ -174,6 +193,13 @@ impl Trainer {
             if !resuming && let Some(log_std) = spec.start_log_std() {
                 ppo.net.set_log_std(log_std as f32)?;
             }
+            if let Some((state, tensors)) = &exact
+                && let Some(record) = &state.ppo
+            {
+                let params = ppo.net.params().len();
+                ppo.restore(run_state::ppo_state(record, params, tensors)?)
+                    .context("resuming the optimizer from the checkpoint")?;
+            }
             Learner::Ppo(Box::new(ppo))
         };
         let (window, threshold) = if is_sac {
@@ -197,16 +223,44 @@ impl Trainer {
                 ))
             })
             .collect::<Result<Vec<_>>>()?;
-        let envs = VecEnv::new(envs, seed)?;
+        let mut envs = VecEnv::new(envs, seed)?;
         let stage_names = (0..layout.stages)
             .map(|s| machine.stage_name(s).to_string())
             .collect();
+        let mut tasks = TaskCurriculum::new(benchmark.tasks.len());
+        let mut early_stop = EarlyStop::new(window, threshold as f32);
+        let mut last_100 = EarlyStop::new(100, 1.0);
+        let mut iteration = 0;
+        let mut resumed_state_from = None;
+        if let Some((state, tensors)) = &exact {
+            // Each environment draws its running episode's task as it did, then replays it.
+            for (env, record) in envs.envs_mut().zip(&state.envs) {
+                env.env_mut()
+                    .inner_mut()
+                    .set_task_weights(record.task_weights.clone())?;
+            }
+            envs.restore(&run_state::env_states(state, tensors)?)
+                .context("replaying the running episodes of the checkpoint")?;
+            tasks.restore(&state.tasks);
+            early_stop.restore(&state.early_stop);
+            last_100.restore(&state.last_100);
+            if spec.curriculum {
+                let weights = tasks.weights();
+                for env in envs.envs_mut() {
+                    env.env_mut()
+                        .inner_mut()
+                        .set_task_weights(Some(weights.clone()))?;
+                }
+            }
+            iteration = state.iteration;
+            resumed_state_from = Some(state.made_on.clone());
+        }
         Ok(Self {
-            tasks: TaskCurriculum::new(benchmark.tasks.len()),
+            tasks,
             task_ids: benchmark.tasks.iter().map(|t| t.id.clone()).collect(),
             curriculum: spec.curriculum,
-            early_stop: EarlyStop::new(window, threshold as f32),
-            last_100: EarlyStop::new(100, 1.0),
+            early_stop,
+            last_100,
             spec,
             envs,
             recorder,
@@ -228,9 +282,16 @@ impl Trainer {
             imitation: None,
             start_steps,
             done: start_steps,
-            iteration: 0,
+            iteration,
             stopped_early: false,
+            resumed_state_from,
         })
+    }
+
+    /// When the run went on from a checkpoint with its whole training state: the machine that
+    /// state was made on (the same run only on the same CPU type).
+    pub fn resumed_state_from(&self) -> Option<&str> {
+        self.resumed_state_from.as_deref()
     }
 
     /// Behaviour cloning of `demos` into a PPO learner's policy before training (see
@@ -418,7 +479,47 @@ impl Trainer {
         Ok(iteration)
     }
 
-    /// Writes the current networks as a checkpoint.
+    /// The run's training state besides the networks: the header's part and the tensors.
+    fn state(
+        &self,
+        ppo: &crm_learn::Ppo,
+    ) -> Result<(RunState, Vec<(String, candle_core::Tensor)>)> {
+        let envs = self.envs.states();
+        let learner = ppo.state();
+        let tensors = run_state::tensors(&envs, Some(&learner))?;
+        let records = envs
+            .iter()
+            .zip(self.envs.envs())
+            .map(|(env, crm_env)| EnvRecord {
+                episode: env.episode,
+                noise: env.noise,
+                steps: env.actions.len(),
+                task_weights: crm_env
+                    .env()
+                    .inner()
+                    .episode_task_weights()
+                    .map(<[f32]>::to_vec),
+            })
+            .collect();
+        let state = RunState {
+            made_on: run_state::this_machine(),
+            iteration: self.iteration,
+            early_stop: self.early_stop.outcomes(),
+            last_100: self.last_100.outcomes(),
+            tasks: self.tasks.outcomes(),
+            envs: records,
+            ppo: Some(PpoRecord {
+                adam_step: learner.adam_step,
+                noise: learner.noise,
+                returns: learner.returns,
+                return_stats: learner.return_stats,
+            }),
+        };
+        Ok((state, tensors))
+    }
+
+    /// Writes the current networks as a checkpoint (with the training state while the run
+    /// is unfinished).
     pub fn save(&self, path: &Path) -> Result<()> {
         let header = CheckpointHeader {
             format: FORMAT.to_string(),
@@ -441,10 +542,20 @@ impl Trainer {
             world: Some(self.world.0.clone()),
             world_hash: Some(self.world.1.clone()),
             lineage: self.lineage()?,
+            state: None,
         };
         // Write beside and rename, so a reader never sees half a checkpoint.
         let partial = path.with_extension("safetensors.partial");
         match &self.learner {
+            // An unfinished run keeps its whole training state; a finished one the policy.
+            Learner::Ppo(ppo) if !self.finished() => {
+                let (state, tensors) = self.state(ppo)?;
+                let header = CheckpointHeader {
+                    state: Some(state),
+                    ..header
+                };
+                Checkpoint::save_with(&ppo.net, &header, &tensors, &partial)?
+            }
             Learner::Ppo(ppo) => Checkpoint::save(&ppo.net, &header, &partial)?,
             Learner::Sac(sac) => Checkpoint::save_sac(&sac.nets, &header, &partial)?,
         }

@@ -65,6 +65,32 @@ pub enum FingerActions {
     Closing,
 }
 
+/// How the policy's palm actions move the hand in the approach stage: a world setting
+/// (`world.json`'s `approach`), part of the world's hash.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Approach {
+    /// Each palm action moves the grasp point by its scaled step (1 cm per unit), anywhere
+    /// in the workspace (DESIGN.md's approach).
+    #[default]
+    Free,
+    /// The authors' geometry (DexMobile's `Dualenv.step` and `Dualcontrol.applyAction`,
+    /// docs/WORLDS.md): a step on an axis slows to 3 mm per unit within 3 cm of the target
+    /// on that axis and to 0.5 mm within 1.5 cm, and the grasp point is clamped to the box
+    /// between its start and 1 cm past the target on every axis ([`crate::env::approach`]).
+    Authors,
+}
+
+impl Approach {
+    /// The name `world.json` gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Free => "free",
+            Self::Authors => "authors",
+        }
+    }
+}
+
 /// Everything that sets the world's physics, timing and tests.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -139,6 +165,8 @@ pub struct SimConfig {
     /// arm's lift. Only training sets it; evaluations run the full hold. Agreement with the
     /// full hold is measured by `crm bench hold` (docs/BENCHMARKS.md).
     pub settle_s: f32,
+    /// How palm actions move the hand in the approach (default: [`Approach::Free`]).
+    pub approach: Approach,
 }
 
 /// How far (m) the object may move in the palm's frame and still count as resting
@@ -176,6 +204,7 @@ impl Default for SimConfig {
             stiction: StictionConfig::default(),
             preshape_speed: 5.0,
             settle_s: 0.0,
+            approach: Approach::Free,
         }
     }
 }

@@ -44,7 +44,7 @@ pub mod view;
 pub mod world;
 
 pub use benchmark::Benchmark;
-pub use config::{FingerActions, Protocol, Randomization, SimConfig};
+pub use config::{Approach, FingerActions, Protocol, Randomization, SimConfig};
 pub use env::{GraspEnv, TaskChoice};
 pub use error::{Error, Result};
 pub use setup::EnvSettings;

@@ -53,6 +53,7 @@ impl World {
             SimConfig::deterministic()
         };
         config.protocol = settings.protocol;
+        config.approach = self.approach;
         config.finger_actions = settings.finger_actions;
         if let Some(hold) = settings.hold_s {
             config.hold_s = hold as f32;

@@ -17,7 +17,7 @@ use sha2::{Digest, Sha256};
 
 use crate::assets::Assets;
 use crate::benchmark::{Benchmark, SharedHand};
-use crate::config::Randomization;
+use crate::config::{Approach, Randomization};
 use crate::error::{Error, Result, parse_json, read_text};
 use crate::hand::HandModel;
 use crate::hand::description::{Description, Source};
@@ -44,6 +44,10 @@ pub struct WorldFile {
     /// What the robot senses (default: every feature).
     #[serde(default)]
     pub sensors: Sensors,
+    /// How palm actions move the hand in the approach: `"free"` (default) or `"authors"`
+    /// (the authors' slowed, clamped steps; [`Approach`]). Part of the hash when not free.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub approach: Option<Approach>,
     /// Folders searched for files after the world's own and before `CRM_ASSETS` (absolute,
     /// or relative to the world's folder): where an imported world's source lies. Not part
     /// of the hash, so a copy of the same files elsewhere makes the same world.
@@ -99,6 +103,8 @@ pub struct World {
     pub benchmark: Arc<Benchmark>,
     pub spec: Option<crm::Spec>,
     pub randomization: Option<Randomization>,
+    /// How palm actions move the hand in the approach.
+    pub approach: Approach,
     /// A hash of what shapes a policy's observation and action: the hand profile, the spec,
     /// the sensors and every file of the hand by content (its description, the files that
     /// includes, its meshes), never where the files lie. Checkpoints record it.
@@ -117,6 +123,7 @@ impl World {
             crate::hand::builtin::PROFILE,
             &spec_text(&crate::spec::grasping_spec()),
             &[],
+            Approach::Free,
         );
         let mut content = Sha256::new();
         crate::hand::includes::add_content(
@@ -130,6 +137,7 @@ impl World {
             benchmark: Arc::new(benchmark),
             spec: None,
             randomization: None,
+            approach: Approach::Free,
             hash: with_content(&profile_hash, &content.finalize().into()),
             profile_hash,
         }
@@ -263,7 +271,8 @@ impl World {
         without.sort_unstable();
         without.dedup();
         benchmark.sensors_without = without.clone();
-        let profile_hash = world_hash(&canonical(&profile_text), &spec_text, &without);
+        let approach = file.approach.unwrap_or_default();
+        let profile_hash = world_hash(&canonical(&profile_text), &spec_text, &without, approach);
         if let Some(randomization) = &file.randomization
             && [
                 randomization.position,
@@ -285,6 +294,7 @@ impl World {
             benchmark: Arc::new(benchmark),
             spec,
             randomization: file.randomization,
+            approach,
             hash: with_content(&profile_hash, &description.content),
             profile_hash,
         })
@@ -328,13 +338,19 @@ fn with_content(profile_hash: &str, content: &[u8; 32]) -> String {
     digest.iter().take(8).map(|b| format!("{b:02x}")).collect()
 }
 
-fn world_hash(profile: &str, spec: &str, without: &[usize]) -> String {
+/// The hash of the profile, spec, sensors and (when not free, so that free worlds keep the
+/// hashes their checkpoints recorded) the approach geometry.
+fn world_hash(profile: &str, spec: &str, without: &[usize], approach: Approach) -> String {
     let mut hasher = Sha256::new();
     hasher.update(canonical(profile).as_bytes());
     hasher.update([0]);
     hasher.update(canonical(spec).as_bytes());
     hasher.update([0]);
     hasher.update(format!("{without:?}").as_bytes());
+    if approach != Approach::Free {
+        hasher.update([0]);
+        hasher.update(approach.name().as_bytes());
+    }
     let digest = hasher.finalize();
     digest.iter().take(8).map(|b| format!("{b:02x}")).collect()
 }
@@ -360,6 +376,19 @@ mod tests {
         assert_eq!(world.hash, builtin.hash);
         assert_eq!(world.benchmark.tasks, builtin.benchmark.tasks);
         assert_eq!(world.summary()["hand"]["joints"], 14);
+    }
+
+    #[test]
+    fn the_authors_approach_is_a_world_setting_in_its_hash() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/crm-authors-approach");
+        let world = World::load_with(&dir, &Assets::default()).expect("crm-authors-approach");
+        let builtin = World::builtin();
+        assert_eq!(world.approach, Approach::Authors);
+        assert_eq!(world.benchmark.tasks, builtin.benchmark.tasks);
+        assert_ne!(world.hash, builtin.hash);
+        let settings = crate::EnvSettings::default();
+        assert_eq!(world.sim_config(&settings).approach, Approach::Authors);
+        assert_eq!(builtin.sim_config(&settings).approach, Approach::Free);
     }
 
     #[test]

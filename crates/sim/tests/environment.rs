@@ -265,3 +265,53 @@ fn task_subsets_and_forced_topologies_apply_from_the_next_reset() {
     env.reset_task(0, 1).expect("reset");
     assert_eq!(env.topology(), assigned);
 }
+
+#[test]
+fn the_authors_approach_keeps_the_grasp_point_between_its_start_and_1_cm_past_the_target() {
+    let point = |env: &GraspEnv| {
+        env.scene()
+            .map(|s| s.hand.grasp_point(&s.world))
+            .expect("scene")
+    };
+    let push = |approach: grasp_sim::Approach, toward: bool, steps: usize| {
+        let mut env = env(SimConfig {
+            approach,
+            ..SimConfig::deterministic()
+        });
+        env.reset_task(0, 1).expect("reset");
+        let start = point(&env);
+        let target = env.grasp_location().expect("target");
+        let sign = (target - start).signum() * if toward { 1.0 } else { -1.0 };
+        for _ in 0..steps {
+            let action = [
+                0.01 * sign.x,
+                0.01 * sign.y,
+                0.01 * sign.z,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ];
+            env.step_action(&action).expect("step");
+        }
+        // Where the grasp point went, along each axis's way from the start to the target (the
+        // target as the object stands now: the hand may nudge it).
+        let way = (target - start).signum();
+        let now = env.grasp_location().expect("target");
+        ((point(&env) - start) * way, (point(&env) - now) * way)
+    };
+    // Pushed back from the target, the clamp holds it at its start (the wrist's lag aside).
+    let (from_start, _) = push(grasp_sim::Approach::Authors, false, 20);
+    assert!(from_start.min_element() > -0.003, "{from_start:?}");
+    let (from_start, _) = push(grasp_sim::Approach::Free, false, 20);
+    assert!(from_start.max_element() < -0.1, "free: {from_start:?}");
+    // Pushed on to the target and beyond, it stops 1 cm past the target on every axis.
+    let (_, past) = push(grasp_sim::Approach::Authors, true, 120);
+    assert!(
+        past.max_element() < 0.013 && past.min_element() > -0.006,
+        "{past:?}"
+    );
+    let (_, past) = push(grasp_sim::Approach::Free, true, 120);
+    assert!(past.max_element() > 0.1, "free: {past:?}");
+}

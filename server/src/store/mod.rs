@@ -439,16 +439,18 @@ impl Store {
         Ok(done.rows_affected())
     }
 
-    /// Leases the oldest queued job to `worker` for `ttl_ms`; none while `worker` holds a
-    /// lease already (one job per worker: a second lease would only starve the first).
-    /// Leases the oldest queued job to `worker`, unless it holds one; `lease_hash` is the hash
-    /// of the lease's secret, which every call about the job must then match.
+    /// Leases a queued job to `worker` for `ttl_ms`: the oldest evaluation, else the oldest
+    /// training job (an evaluation takes minutes and its result is what a study or a user
+    /// waits on; behind a sweep's training jobs it would wait hours). None while `worker`
+    /// holds a lease already (one job per worker: a second lease would only starve the
+    /// first). `lease_hash` is the hash of the lease's secret, which every call about the job
+    /// must then match.
     pub async fn lease(&self, worker: &str, lease_hash: &str, ttl_ms: i64) -> Result<Option<Job>> {
         self.touch_worker(worker).await?;
         self.requeue_expired().await?;
         let now = now_ms();
         let id: Option<i64> = sqlx::query_scalar(
-            "UPDATE jobs SET state = 'running', worker_id = ?1, lease_hash = ?4, attempts = attempts + 1, lease_expires_at = ?2, started_at = COALESCE(started_at, ?3) WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY id LIMIT 1) AND NOT EXISTS (SELECT 1 FROM jobs WHERE worker_id = ?1 AND state = 'running') RETURNING id",
+            "UPDATE jobs SET state = 'running', worker_id = ?1, lease_hash = ?4, attempts = attempts + 1, lease_expires_at = ?2, started_at = COALESCE(started_at, ?3) WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY kind = 'train', id LIMIT 1) AND NOT EXISTS (SELECT 1 FROM jobs WHERE worker_id = ?1 AND state = 'running') RETURNING id",
         )
         .bind(worker)
         .bind(now + ttl_ms)

@@ -143,6 +143,44 @@ async fn a_worker_holds_one_lease_at_a_time() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Evaluations are leased before training jobs queued earlier (a sweep's evaluation of a
+/// finished run does not wait behind the sweep's other training runs); each kind in order.
+#[tokio::test]
+async fn evaluations_are_leased_before_training_jobs() {
+    let dir = temp_dir("eval-first");
+    let store = Store::open(&dir).await.expect("open");
+    let worker = store
+        .register_worker("w", 2, "test", "secret-w")
+        .await
+        .expect("worker")
+        .id;
+    let train = store.create_job(new_job("{}")).await.expect("job").id;
+    let later_train = store.create_job(new_job("{}")).await.expect("job").id;
+    let eval = |_: ()| NewJob {
+        kind: "eval",
+        ..new_job("{}")
+    };
+    let first_eval = store.create_job(eval(())).await.expect("job").id;
+    let second_eval = store.create_job(eval(())).await.expect("job").id;
+    let mut order = Vec::new();
+    for k in 0..4 {
+        let job = store
+            .lease(&worker, &format!("lease-{k}"), 60_000)
+            .await
+            .expect("lease")
+            .expect("a queued job");
+        order.push(job.id);
+        let hash = format!("lease-{k}");
+        store
+            .succeed(Lease::new(&worker, job.id, &hash), "{}")
+            .await
+            .expect("succeed");
+    }
+    assert_eq!(order, [first_eval, second_eval, train, later_train]);
+    store.close().await;
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A lease is its secret: a worker whose lease expired and whose job went to another worker
 /// can no longer heartbeat, report or finish it, and a worker's secret matches only itself.
 #[tokio::test]

@@ -142,6 +142,34 @@ impl Rest {
         self.call("GET", path, None)
     }
 
+    /// GETs a file's bytes (a checkpoint's download); an error status quotes the API's
+    /// message.
+    pub fn get_bytes(&self, path: &str) -> anyhow::Result<Vec<u8>> {
+        let url = format!("{}{path}", self.base);
+        let mut request = self.agent.get(&url);
+        if let Some(token) = &self.token {
+            request = request.header("authorization", format!("Bearer {token}"));
+        }
+        let mut response = request
+            .call()
+            .with_context(|| format!("cannot reach the coordinator at {}", self.base))?;
+        let status = response.status().as_u16();
+        let bytes = response
+            .body_mut()
+            .with_config()
+            .limit(1 << 30)
+            .read_to_vec()
+            .with_context(|| format!("reading the answer of GET {url}"))?;
+        if status >= 400 {
+            let value: Value = serde_json::from_slice(&bytes).unwrap_or_default();
+            bail!(
+                "GET {path}: {status} {}",
+                value["error"]["message"].as_str().unwrap_or("no message")
+            );
+        }
+        Ok(bytes)
+    }
+
     /// Waits for a job to finish, calling `progress` with its progress (0 to 1) as it
     /// changes; returns the job when it succeeded, an error with its message otherwise.
     pub fn wait(&self, id: i64, mut progress: impl FnMut(f64)) -> anyhow::Result<Value> {

@@ -161,6 +161,17 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let metrics_path = args.out.join("metrics.jsonl");
+    if let Some(made_on) = trainer.resumed_state_from() {
+        // The same run goes on: the log keeps what it wrote up to the checkpoint.
+        keep_metrics_until(&metrics_path, trainer.steps())?;
+        let here = crm_learn::state::this_machine();
+        if made_on != here {
+            eprintln!(
+                "note: the checkpoint's state was made on {made_on}, this is {here}: the run \
+                 goes on, but floating-point results differ between CPU types"
+            );
+        }
+    }
     let mut metrics = std::fs::OpenOptions::new()
         .create(true)
         .append(args.resume.is_some())
@@ -238,6 +249,25 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         metrics_path.display()
     );
     Ok(())
+}
+
+/// Drops the lines of a metrics log past `steps` (what a killed run wrote after its last
+/// checkpoint), so a resumed run's log reads as if it had never stopped.
+fn keep_metrics_until(path: &std::path::Path, steps: u64) -> anyhow::Result<()> {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Ok(());
+    };
+    let kept: String = text
+        .lines()
+        .filter(|line| {
+            serde_json::from_str::<serde_json::Value>(line)
+                .ok()
+                .and_then(|v| v["steps"].as_u64())
+                .is_some_and(|s| s <= steps)
+        })
+        .map(|line| format!("{line}\n"))
+        .collect();
+    std::fs::write(path, kept).with_context(|| format!("rewriting {}", path.display()))
 }
 
 /// The training spec the flags make.

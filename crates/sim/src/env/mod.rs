@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use rapier3d::prelude::*;
 
 use crate::benchmark::{Benchmark, FingerShape, Objective, Task, Topology};
-use crate::config::{Protocol, SimConfig};
+use crate::config::{Approach, Protocol, SimConfig};
 use crate::contacts::{ContactMetrics, object_contacts};
 use crate::error::{Error, Result};
 use crate::events::{FailCause, Judge, Snapshot};
@@ -15,6 +15,7 @@ use crate::hand::HAND_GROUP;
 use crate::observation::{ACTIONS, MAX_FINGER_STEP, MAX_PALM_STEP, ObservationParts};
 use crate::scene::{self, Scene};
 
+pub mod approach;
 mod execute;
 pub mod script;
 
@@ -38,6 +39,8 @@ pub struct GraspEnv {
     topologies: Option<Vec<Topology>>,
     /// Per-task sampling weights over the task choice (a curriculum); uniform when absent.
     task_weights: Option<Vec<f32>>,
+    /// The weights this episode's task was drawn with (a resumed run draws it again so).
+    episode_weights: Option<Vec<f32>>,
     task_index: usize,
     scene: Option<Scene>,
     judge: Option<Judge>,
@@ -54,6 +57,10 @@ pub struct GraspEnv {
     parts: ObservationParts,
     last_fail: Option<FailCause>,
     mount_target: Vec3,
+    /// The grasp point where the episode began (the authors' approach clamps to it), and
+    /// where the grasp point sits in the mount's frame with the palm at rest on the mount.
+    approach_start: Vec3,
+    grasp_in_mount: Vec3,
     /// Whether a relaxed hand is still on its way to the preshape (see
     /// [`SimConfig::preshape_speed`]).
     preshaping: bool,
@@ -78,8 +85,11 @@ impl GraspEnv {
             hand_contacts: ContactMetrics::default(),
             parts: ObservationParts::default(),
             task_weights: None,
+            episode_weights: None,
             last_fail: None,
             mount_target: Vec3::ZERO,
+            approach_start: Vec3::ZERO,
+            grasp_in_mount: Vec3::ZERO,
             preshaping: false,
         }
     }
@@ -115,6 +125,12 @@ impl GraspEnv {
         }
         self.task_weights = weights;
         Ok(())
+    }
+
+    /// The task weights the current episode was drawn with (`None`: uniformly): what
+    /// [`Self::set_task_weights`] must set again before the same seed draws the same task.
+    pub fn episode_task_weights(&self) -> Option<&[f32]> {
+        self.episode_weights.as_deref()
     }
 
     /// Overrides each task's grasp topology (one entry per task of the benchmark), or goes
@@ -274,6 +290,9 @@ impl GraspEnv {
         );
         judge.set_stage(&self.stage);
         self.mount_target = scene.mount_start;
+        self.approach_start = scene.hand.grasp_point(&scene.world);
+        let mount = scene.hand.mount_pose(&scene.world);
+        self.grasp_in_mount = mount.rotation.inverse() * (self.approach_start - mount.translation);
         self.scene = Some(scene);
         self.judge = Some(judge);
         self.steps = 0;
@@ -300,6 +319,7 @@ impl GraspEnv {
             }
             (TaskChoice::Subset(list), Some(weights)) => weighted(list, weights, &mut rng),
         };
+        self.episode_weights = self.task_weights.clone();
         self.reset_task(task, seed)
     }
 
@@ -348,6 +368,7 @@ impl GraspEnv {
         self.clipped += clipped;
         self.preshape_step()?;
         self.move_fingers(&fingers)?;
+        let delta = self.approach_step(delta)?;
         let mut events = self.advance(delta, 0.0)?;
         self.steps += 1;
         if self.hands_over(&events) {
@@ -358,6 +379,28 @@ impl GraspEnv {
             events,
             truncated: self.steps >= self.config.max_episode_steps,
         })
+    }
+
+    /// The palm step the world's approach geometry makes of the policy's `delta`: as given
+    /// ([`Approach::Free`]), or slowed and clamped as the authors' arm moves
+    /// ([`Approach::Authors`], in the approach stage only; [`approach::authors_step`]).
+    fn approach_step(&self, delta: Vec3) -> Result<Vec3> {
+        if self.config.approach == Approach::Free || self.stage != "approach" {
+            return Ok(delta);
+        }
+        let scene = self.scene.as_ref().ok_or(Error::NotReset)?;
+        let target = self.grasp_location().ok_or(Error::NotReset)?;
+        // Where the arm has the grasp point: the mount's commanded position carried by the
+        // palm's offset from the mount (the palm lags the mount by the wrist's compliance).
+        let offset =
+            scene.hand.grasp_point(&scene.world) - scene.hand.mount_pose(&scene.world).translation;
+        let point = self.mount_target + offset;
+        Ok(approach::authors_step(
+            delta,
+            point,
+            self.approach_start,
+            target,
+        ))
     }
 
     /// Moves the fingers' commands toward the topology's preshape by at most one control

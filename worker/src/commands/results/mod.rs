@@ -1,13 +1,20 @@
-//! `crm results`: the paper's Table I as one sweep through a coordinator. It submits the
-//! algorithms x seeds grid (`POST /api/v1/sweeps`, every final checkpoint evaluated on one
-//! evaluation seed), waits with a progress bar, and writes `RESULTS.md` (Table I as mean ± std
-//! over seeds beside the paper's numbers, row by row; budget, seeds, settings, wall-clock per
-//! algorithm) and curves with ±1 std bands as PNG (`plot.rs`). With `--coordinator URL` the
-//! study runs on that coordinator's workers (on other machines too); without, a coordinator
-//! and local workers start in this process, as `crm up` does.
+//! `crm results`: the paper's Table I as a study of algorithms x seeds through a coordinator,
+//! one that survives interruption and can be read without rerunning it. The runs go to the
+//! coordinator as sweeps (every final checkpoint evaluated sampled and deterministic,
+//! `study.rs`); each finished run is written under `OUT/results/NAME/` (`record.rs`) and
+//! `OUT/RESULTS.md` is rebuilt from every study there (`report.rs`: Table I beside the
+//! paper's, interval estimates of `stats.rs`, every run's early stop and wall-clock, the
+//! curves and performance profile of `plot.rs`). The same command again continues the study:
+//! finished runs are kept, interrupted ones resume from their last checkpoint, new seeds or
+//! algorithms extend it. `--report-only` rebuilds the report from the files alone. With
+//! `--coordinator URL` the study runs on that coordinator's workers; without, a coordinator
+//! and local workers start in this process on `--data-dir`, as `crm up` does.
 
 mod plot;
-mod table;
+pub mod record;
+mod report;
+pub mod stats;
+mod study;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -15,8 +22,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use crm_api::{Algorithm, Iteration, PpoConfig, SacConfig};
-use serde_json::{Value, json};
+use crm_api::{Algorithm, PpoConfig, SacConfig};
 
 use super::read_json;
 use super::remote::Rest;
@@ -24,9 +30,10 @@ use crate::service::{WorkerOptions, run_worker};
 
 #[derive(clap::Args, Debug)]
 pub struct ResultsArgs {
-    /// Environment steps per run (the paper: 5,000,000).
-    #[arg(long)]
-    pub steps: u64,
+    /// Environment steps per run (the paper: 5,000,000); runs stop sooner by the early-stop
+    /// rule of the PPO and SAC settings.
+    #[arg(long, required_unless_present_any = ["report_only", "stats_of"])]
+    pub steps: Option<u64>,
     /// Training seeds per algorithm: SEED, SEED+1, ... (the paper: 5).
     #[arg(long, default_value_t = 5)]
     pub seeds: u64,
@@ -70,25 +77,63 @@ pub struct ResultsArgs {
     /// Data folder of the coordinator started here.
     #[arg(long, default_value = "runs/results-data")]
     pub data_dir: PathBuf,
-    /// Folder for RESULTS.md; the plots go to its `results/` subfolder.
+    /// Folder for RESULTS.md; each study's runs and plots go to `OUT/results/NAME/`.
     #[arg(long, default_value = "docs")]
     pub out: PathBuf,
-}
-
-/// What the study needs to write its report.
-pub struct Study {
-    pub args_line: String,
-    pub coordinator: String,
-    pub sweep: Value,
-    pub ppo: PpoConfig,
-    pub sac: SacConfig,
-    /// Per training run: its algorithm, seed and metric series.
-    pub curves: Vec<(String, u64, Vec<Iteration>)>,
+    /// The study's name, its folder under `OUT/results/` (default: `builtin` for the built-in
+    /// world, else the world's name).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// The world the runs train and evaluate in, by the coordinator's name for it (default:
+    /// the built-in world).
+    #[arg(long)]
+    pub world: Option<String>,
+    /// A folder of world folders for the coordinator and workers started here (`crm up
+    /// --worlds`).
+    #[arg(long, value_name = "DIR")]
+    pub worlds: Option<PathBuf>,
+    /// Training's hold shortcut (s; `crm train --settle-s`); evaluations run the full hold.
+    #[arg(long)]
+    pub settle_s: Option<f64>,
+    /// Why the budget is what it is, printed in the report.
+    #[arg(long)]
+    pub budget_note: Option<String>,
+    /// Rebuild RESULTS.md and every plot from the studies under `OUT/results/`, without
+    /// training or a coordinator.
+    #[arg(long)]
+    pub report_only: bool,
+    /// Print the interval estimates of a score file as JSON and exit (`{"scores": {ALGO:
+    /// [[run's task scores], ...]}, "reference": ALGO, "reps": N, "seed": S}`).
+    #[arg(long, value_name = "FILE", conflicts_with = "report_only")]
+    pub stats_of: Option<PathBuf>,
+    /// Bootstrap samples per interval (rliable's default: 50,000).
+    #[arg(long, default_value_t = stats::REPS)]
+    pub reps: usize,
 }
 
 pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
-    if args.steps == 0 || args.episodes == 0 || args.envs == 0 || args.seeds == 0 {
+    if args.reps == 0 {
+        bail!("--reps must be positive");
+    }
+    if let Some(path) = &args.stats_of {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let request: stats::StatsRequest =
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        let answer = stats::answer(&request).with_context(|| path.display().to_string())?;
+        println!("{}", serde_json::to_string(&answer)?);
+        return Ok(());
+    }
+    if args.report_only {
+        return write_report(&args.out, args.reps);
+    }
+    let steps = args.steps.unwrap_or_default();
+    if steps == 0 || args.episodes == 0 || args.envs == 0 || args.seeds == 0 {
         bail!("--steps, --seeds, --episodes and --envs must be positive");
+    }
+    if let Some(settle) = args.settle_s {
+        crm_api::jobs::check_settle_s(Some(settle))
+            .map_err(|e| anyhow::anyhow!("--settle-s: {e}"))?;
     }
     let ppo: PpoConfig = read_json(&args.ppo_config)?;
     let sac: SacConfig = read_json(&args.sac_config)?;
@@ -97,7 +142,7 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
     match &args.coordinator {
         Some(url) => {
             let rest = Rest::new(url, args.token.clone(), args.ca.as_deref())?;
-            study(&args, &rest, url, ppo, sac)
+            study(&args, &rest, ppo, sac)
         }
         None => local(&args, ppo, sac),
     }
@@ -111,6 +156,7 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
         grpc: "127.0.0.1:0".into(),
         data_dir: args.data_dir.clone(),
         token: args.token.clone(),
+        worlds: args.worlds.clone(),
         ..crm_server::ServerConfig::default()
     };
     let running = runtime.block_on(crm_server::start(config))?;
@@ -124,7 +170,7 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
             checkpoint_every_s: 120,
             poll_s: 0.5,
             envs: None,
-            worlds: None,
+            worlds: args.worlds.clone(),
         };
         let stop = stop.clone();
         runtime.spawn(async move {
@@ -139,124 +185,204 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
         args.data_dir.display()
     );
     let rest = Rest::new(&url, args.token.clone(), None)?;
-    let result = study(args, &rest, &url, ppo, sac);
+    let result = study(args, &rest, ppo, sac);
     stop.store(true, Ordering::Relaxed);
     runtime.block_on(running.stop())?;
     runtime.shutdown_timeout(Duration::from_secs(2));
     result
 }
 
-/// Submits the sweep, waits for it, fetches the curves and writes the report.
-fn study(
-    args: &ResultsArgs,
-    rest: &Rest,
-    url: &str,
-    ppo: PpoConfig,
-    sac: SacConfig,
-) -> anyhow::Result<()> {
+/// Runs (or continues, or extends) the study of `args` on the coordinator at `rest`,
+/// rebuilding the report after every run that lands and at the end.
+fn study(args: &ResultsArgs, rest: &Rest, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<()> {
+    let world = args.world.clone().unwrap_or_else(|| "crm".into());
+    let name = args.name.clone().unwrap_or_else(|| {
+        if world == "crm" {
+            "builtin".into()
+        } else {
+            world.clone()
+        }
+    });
+    if name.is_empty()
+        || !name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+        || name.starts_with('.')
+    {
+        bail!("--name: {name:?} must be letters, digits, '-', '_' and '.' (a folder name)");
+    }
+    let catalog = if world == "crm" {
+        rest.get("/api/v1/tasks")?
+    } else {
+        rest.get(&format!("/api/v1/tasks?world={world}"))?
+    };
+    let task_objectives = catalog["tasks"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|t| args.task.is_empty() || args.task.iter().any(|id| t["id"].as_str() == Some(id)))
+        .filter_map(|t| {
+            Some((
+                t["id"].as_str()?.to_string(),
+                t["objective"].as_str()?.to_string(),
+            ))
+        })
+        .collect();
     let algorithms = if args.algo.is_empty() {
         Algorithm::ALL.to_vec()
     } else {
         args.algo.clone()
     };
-    let seeds: Vec<u64> = (args.seed..args.seed + args.seeds).collect();
-    let request = json!({
-        "name": "crm results: Table I",
-        "base": {
-            "steps": args.steps, "envs": args.envs, "tasks": args.task,
-            "config": ppo, "sac": sac,
-        },
-        "axes": {
-            "algorithm": algorithms.iter().map(|a| a.name()).collect::<Vec<_>>(),
-            "seed": seeds,
-        },
-        "eval": {"episodes": args.episodes, "seed": args.eval_seed, "tasks": args.task},
-    });
-    let created = rest.post_json("/api/v1/sweeps", &request)?;
-    let id = created["sweep"]["id"]
-        .as_i64()
-        .context("the coordinator's answer has no sweep id")?;
-    eprintln!(
-        "sweep {id}: {} runs; follow it at {url}/sweeps/{id}",
-        algorithms.len() * seeds.len()
-    );
-    let bar = indicatif::ProgressBar::new(0);
-    let sweep = loop {
-        let sweep = rest.get(&format!("/api/v1/sweeps/{id}"))?;
-        let progress = &sweep["progress"];
-        bar.set_length(progress["jobs"].as_u64().unwrap_or(0));
-        bar.set_position(progress["finished"].as_u64().unwrap_or(0));
-        if progress["fraction"].as_f64().unwrap_or(0.0) >= 1.0 {
-            break sweep;
-        }
-        std::thread::sleep(Duration::from_secs(2));
-    };
-    bar.finish_and_clear();
-    let failed: Vec<String> = sweep["jobs"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|j| j["state"] == "failed")
-        .map(|j| {
-            format!(
-                "job {}: {}",
-                j["id"],
-                j["error"].as_str().unwrap_or("no message")
-            )
-        })
-        .collect();
-    if !failed.is_empty() {
-        eprintln!(
-            "{} jobs failed (the table leaves them out):\n  {}",
-            failed.len(),
-            failed.join("\n  ")
-        );
-    }
-    let mut curves = Vec::new();
-    for run in sweep["jobs"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|j| j["kind"] == "train")
-    {
-        let id = run["id"].as_i64().context("a job without id")?;
-        let metrics = rest.get(&format!("/api/v1/runs/{id}/metrics"))?;
-        let series: Vec<Iteration> = metrics["metrics"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .filter_map(|m| serde_json::from_value(m["data"].clone()).ok())
-            .collect();
-        let algorithm = run["algorithm"].as_str().unwrap_or_default().to_string();
-        curves.push((algorithm, run["spec"]["seed"].as_u64().unwrap_or(0), series));
-    }
-    let study = Study {
-        args_line: std::env::args().skip(1).collect::<Vec<_>>().join(" "),
-        coordinator: url.to_string(),
-        sweep,
+    let mut file = record::StudyFile {
+        name: name.clone(),
+        command: std::env::args()
+            .skip(1)
+            .map(|a| shell_word(&a))
+            .collect::<Vec<_>>()
+            .join(" "),
+        world,
+        steps: args.steps.unwrap_or_default(),
+        envs: args.envs,
+        tasks: args.task.clone(),
+        episodes: args.episodes,
+        eval_seed: args.eval_seed,
+        seeds: (args.seed..args.seed + args.seeds).collect(),
+        algorithms: algorithms.iter().map(|a| a.name().to_string()).collect(),
         ppo,
         sac,
-        curves,
+        task_objectives,
+        settle_s: args.settle_s,
+        budget_note: args.budget_note.clone(),
     };
-    let plots = args.out.join("results");
-    std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
+    let dir = args.out.join("results").join(&name);
+    let path = dir.join("study.json");
+    if path.exists() {
+        let before = record::Study::read(&dir)?.file;
+        file = extend(&before, file, &path)?;
+    }
+    record::write_json(&path, &file)?;
+    eprintln!(
+        "study {name}: {} algorithms x {} seeds in {}",
+        file.algorithms.len(),
+        file.seeds.len(),
+        dir.display()
+    );
+    study::run(rest, &dir, &file, |_, _| write_report(&args.out, args.reps))?;
+    write_report(&args.out, args.reps)
+}
+
+/// `word` as a POSIX shell reads it back: as it is when it holds only safe characters, else
+/// in single quotes.
+fn shell_word(word: &str) -> String {
+    let safe = |c: char| c.is_ascii_alphanumeric() || "-_./=:,@+".contains(c);
+    if !word.is_empty() && word.chars().all(safe) {
+        word.to_string()
+    } else {
+        format!("'{}'", word.replace('\'', "'\\''"))
+    }
+}
+
+/// The study `asked` continuing `before` (the same settings; its seeds and algorithms joined
+/// to the earlier ones), or an error naming the first setting that differs.
+fn extend(
+    before: &record::StudyFile,
+    asked: record::StudyFile,
+    path: &std::path::Path,
+) -> anyhow::Result<record::StudyFile> {
+    let fields =
+        |f: &record::StudyFile| -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
+            let mut value = serde_json::to_value(f)?;
+            let map = value.as_object_mut().context("a study is an object")?;
+            for key in ["command", "seeds", "algorithms", "budget_note"] {
+                map.remove(key);
+            }
+            Ok(map.clone())
+        };
+    let (old, new) = (fields(before)?, fields(&asked)?);
+    if let Some((key, value)) = old.iter().find(|(k, v)| new.get(*k) != Some(*v)) {
+        bail!(
+            "{}: the study was run with {key} = {value}; this command asks {}: run it with the              study's settings to continue it, or give another --name",
+            path.display(),
+            new.get(key).cloned().unwrap_or_default()
+        );
+    }
+    let mut seeds = before.seeds.clone();
+    seeds.extend(asked.seeds.iter().filter(|s| !before.seeds.contains(s)));
+    let mut algorithms = before.algorithms.clone();
+    algorithms.extend(
+        asked
+            .algorithms
+            .iter()
+            .filter(|a| !before.algorithms.contains(a))
+            .cloned(),
+    );
+    Ok(record::StudyFile {
+        seeds,
+        algorithms,
+        budget_note: asked.budget_note.clone().or(before.budget_note.clone()),
+        ..asked
+    })
+}
+
+/// Rebuilds `OUT/RESULTS.md` and every study's plots from the studies under `OUT/results/`.
+pub fn write_report(out: &std::path::Path, reps: usize) -> anyhow::Result<()> {
+    let root = out.join("results");
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(&root)
+        .with_context(|| format!("reading {} (no study there yet?)", root.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("study.json").is_file())
+        .collect();
+    dirs.sort();
+    if dirs.is_empty() {
+        bail!(
+            "{}: no study (a folder with a study.json) in it",
+            root.display()
+        );
+    }
+    let mut studies = Vec::new();
+    for dir in dirs {
+        let study = record::Study::read(&dir)?;
+        if !study.runs.is_empty() {
+            plots(&study)?;
+        }
+        let link = format!("results/{}", study.file.name);
+        studies.push((study, link));
+    }
+    let path = out.join("RESULTS.md");
+    std::fs::write(&path, report::markdown(&studies, reps))
+        .with_context(|| format!("writing {}", path.display()))?;
+    eprintln!("wrote {}", path.display());
+    Ok(())
+}
+
+/// A study's curves and performance profile, in its folder.
+fn plots(study: &record::Study) -> anyhow::Result<()> {
     plot::bands(
-        &study,
-        &plots.join("success.png"),
-        "success rate (last 100 episodes)",
+        study,
+        &study.dir.join("success.png"),
+        "training success rate (last 100 episodes)",
         Some((0.0, 1.0)),
         |it| it.success_rate_last_100,
     )?;
     plot::bands(
-        &study,
-        &plots.join("episode_length.png"),
+        study,
+        &study.dir.join("episode_length.png"),
         "mean episode length (control steps)",
         Some((0.0, f64::INFINITY)),
-        |it| it.mean_episode_length.unwrap_or(f64::NAN),
+        |it| it.mean_episode_length,
     )?;
-    let path = args.out.join("RESULTS.md");
-    std::fs::write(&path, table::markdown(args, &study))
-        .with_context(|| format!("writing {}", path.display()))?;
-    eprintln!("wrote {}", path.display());
-    Ok(())
+    let tasks = report::common_tasks(study);
+    let thresholds: Vec<f64> = (0..=100).map(|k| f64::from(k) / 100.0).collect();
+    let profiles: Vec<(String, Vec<(f64, f64)>)> = study
+        .file
+        .algorithms
+        .iter()
+        .filter_map(|a| {
+            let runs: Vec<&record::Run> = study.runs_of(a).collect();
+            let scores = report::scores(&runs, &tasks, false)?;
+            let shares = stats::profile(&scores, &thresholds);
+            Some((a.clone(), thresholds.iter().copied().zip(shares).collect()))
+        })
+        .collect();
+    plot::profile(&study.dir.join("profile.png"), &profiles)
 }

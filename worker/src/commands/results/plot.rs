@@ -1,34 +1,32 @@
-//! The study's curves as PNG (plotters): per algorithm, the mean over its seeds as a line and
-//! ±1 std as a band, at the environment steps every seed reported (runs of one algorithm share
-//! the rollout size, so their iterations line up).
+//! The study's plots as PNG (plotters): per algorithm, the mean of its seeds' training curves
+//! as a line and ±1 std as a band, at the environment steps every seed still running reported
+//! (runs of one algorithm share the rollout size, so their iterations line up; a run that
+//! stopped early leaves the band there), and the performance profile of the evaluations.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crm_api::Iteration;
 use plotters::prelude::*;
 
-use super::Study;
+use super::record::{CurvePoint, Study};
 
 const FONT: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 
 /// One algorithm's curve: (steps, mean, std) over its seeds.
 type Band = (String, Vec<(f64, f64, f64)>);
 
-fn bands_of(study: &Study, value: &impl Fn(&Iteration) -> f64) -> Vec<Band> {
-    let mut by_algorithm: Vec<(String, Vec<&Vec<Iteration>>)> = Vec::new();
-    for (algorithm, _, series) in &study.curves {
-        match by_algorithm.iter_mut().find(|(a, _)| a == algorithm) {
-            Some((_, all)) => all.push(series),
-            None => by_algorithm.push((algorithm.clone(), vec![series])),
-        }
-    }
-    by_algorithm
-        .into_iter()
-        .map(|(algorithm, runs)| {
+fn bands_of(study: &Study, value: &impl Fn(&CurvePoint) -> f64) -> Vec<Band> {
+    study
+        .file
+        .algorithms
+        .iter()
+        .filter(|a| study.runs_of(a).next().is_some())
+        .map(|algorithm| {
             let mut at: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
-            for series in &runs {
-                for it in series.iter().filter(|it| it.episodes > 0) {
+            // Points past the shortest run's end are kept while at least half the seeds run.
+            let runs: Vec<_> = study.runs_of(algorithm).collect();
+            for run in &runs {
+                for it in run.curve.iter().filter(|it| it.episodes > 0) {
                     let v = value(it);
                     if v.is_finite() {
                         at.entry(it.steps).or_default().push(v);
@@ -37,7 +35,7 @@ fn bands_of(study: &Study, value: &impl Fn(&Iteration) -> f64) -> Vec<Band> {
             }
             let points = at
                 .into_iter()
-                .filter(|(_, values)| values.len() == runs.len())
+                .filter(|(_, values)| 2 * values.len() >= runs.len())
                 .map(|(steps, values)| {
                     let n = values.len() as f64;
                     let mean = values.iter().sum::<f64>() / n;
@@ -45,7 +43,7 @@ fn bands_of(study: &Study, value: &impl Fn(&Iteration) -> f64) -> Vec<Band> {
                     (steps as f64, mean, std)
                 })
                 .collect();
-            (algorithm, points)
+            (algorithm.clone(), points)
         })
         .collect()
 }
@@ -69,12 +67,42 @@ pub fn bands(
     path: &Path,
     title: &str,
     range: Option<(f64, f64)>,
-    value: impl Fn(&Iteration) -> f64,
+    value: impl Fn(&CurvePoint) -> f64,
 ) -> anyhow::Result<()> {
     let curves: Vec<(String, Vec<Clipped>)> = bands_of(study, &value)
         .into_iter()
         .map(|(algorithm, points)| (algorithm, clipped(&points, range)))
         .collect();
+    draw(path, title, "environment steps", &curves)
+}
+
+/// The performance profile: per algorithm, the share of run x task success rates above each
+/// threshold in [0, 1], with no band (`profiles`: algorithm, (threshold, share) points).
+pub fn profile(path: &Path, profiles: &[(String, Vec<(f64, f64)>)]) -> anyhow::Result<()> {
+    let curves: Vec<(String, Vec<Clipped>)> = profiles
+        .iter()
+        .map(|(a, points)| {
+            (
+                a.clone(),
+                points.iter().map(|&(x, y)| (x, y, y, y)).collect(),
+            )
+        })
+        .collect();
+    draw(
+        path,
+        "performance profile: share of run x task scores > threshold",
+        "success rate threshold",
+        &curves,
+    )
+}
+
+/// Draws lines with bands to a PNG.
+fn draw(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    curves: &[(String, Vec<Clipped>)],
+) -> anyhow::Result<()> {
     // Registering twice is harmless; plotters keeps the first.
     plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
         .map_err(|_| anyhow::anyhow!("the bundled font is not a font"))?;
@@ -106,7 +134,7 @@ pub fn bands(
             .build_cartesian_2d(0.0..x_max, lo..hi)?;
         chart
             .configure_mesh()
-            .x_desc("environment steps")
+            .x_desc(x_desc)
             .label_style(("sans-serif", 14))
             .draw()?;
         for (k, (algorithm, points)) in curves.iter().enumerate() {

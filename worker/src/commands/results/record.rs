@@ -1,0 +1,338 @@
+//! A study on disk: what `crm results` writes as runs finish and what `--report-only` reads
+//! back, so the report can be rebuilt without training. One folder per study
+//! (`OUT/results/NAME/`):
+//!
+//! - `study.json`: how the study was asked ([`StudyFile`]: budget, seeds, settings, world,
+//!   the command line);
+//! - `ALGO/seed-K/run.json`: how the run went ([`RunFile`]: steps, early stop, wall-clock);
+//! - `ALGO/seed-K/eval.json` and `eval-deterministic.json`: its final checkpoint's
+//!   evaluations, sampled and deterministic (`crm_api::EvalReport`, per task and objective);
+//! - `ALGO/seed-K/curve.csv`: its training curve, one line per iteration ([`CURVE_COLUMNS`]);
+//! - `ALGO/seed-K/checkpoint.safetensors`: its final checkpoint, lineage in the header.
+//!
+//! A run counts as finished when its `run.json` exists; the other files are written first.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use crm_api::{EvalReport, Iteration, PpoConfig, SacConfig};
+use serde::{Deserialize, Serialize};
+
+/// `study.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StudyFile {
+    /// The study's folder name (and its sweeps' name on the coordinator).
+    pub name: String,
+    /// The command line that runs (or continues) it.
+    pub command: String,
+    /// The world trained and evaluated in (`crm`: the built-in one).
+    pub world: String,
+    /// Environment steps per run (the budget; runs stop sooner by the early-stop rule).
+    pub steps: u64,
+    pub envs: usize,
+    /// The tasks trained and evaluated (empty: the world's whole benchmark).
+    pub tasks: Vec<String>,
+    /// Evaluation episodes per checkpoint and their seed.
+    pub episodes: u64,
+    pub eval_seed: u64,
+    pub seeds: Vec<u64>,
+    pub algorithms: Vec<String>,
+    pub ppo: PpoConfig,
+    pub sac: SacConfig,
+    /// Each task's objective (from the coordinator's catalog of the world), for the per-objective
+    /// figures.
+    pub task_objectives: std::collections::BTreeMap<String, String>,
+    /// Training's hold shortcut (s), as the jobs ask it.
+    #[serde(default)]
+    pub settle_s: Option<f64>,
+    /// Why the budget is what it is (shown in the report).
+    #[serde(default)]
+    pub budget_note: Option<String>,
+}
+
+/// `run.json`: one finished training run and its evaluations.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunFile {
+    pub algorithm: String,
+    pub seed: u64,
+    /// Environment steps trained.
+    pub steps: u64,
+    /// Whether it stopped by the early-stop rule (else it ran its budget).
+    pub stopped_early: bool,
+    /// Seconds from its first lease to its end, and how many leases it took (more than one:
+    /// it was resumed from a checkpoint).
+    pub train_wall_s: f64,
+    pub leases: u64,
+    /// Seconds of its sampled and its deterministic evaluation.
+    pub eval_wall_s: f64,
+    pub eval_deterministic_wall_s: f64,
+    /// The coordinator's ids of the training job and the final checkpoint.
+    pub train_job: i64,
+    pub checkpoint_id: i64,
+}
+
+/// The columns of `curve.csv`, in order.
+pub const CURVE_COLUMNS: [&str; 9] = [
+    "iteration",
+    "steps",
+    "wall_s",
+    "episodes",
+    "successes",
+    "success_rate_last_100",
+    "mean_episode_length",
+    "mean_return",
+    "mean_transition_return",
+];
+
+/// One line of `curve.csv`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CurvePoint {
+    pub iteration: u64,
+    pub steps: u64,
+    pub wall_s: f64,
+    pub episodes: u64,
+    pub successes: u64,
+    pub success_rate_last_100: f64,
+    /// NaN where no episode ended in the iteration.
+    pub mean_episode_length: f64,
+    pub mean_return: f64,
+    pub mean_transition_return: f64,
+}
+
+impl CurvePoint {
+    pub fn of(it: &Iteration) -> Self {
+        Self {
+            iteration: it.iteration,
+            steps: it.steps,
+            wall_s: it.wall_s,
+            episodes: it.episodes,
+            successes: it.successes,
+            success_rate_last_100: it.success_rate_last_100,
+            mean_episode_length: it.mean_episode_length.unwrap_or(f64::NAN),
+            mean_return: it.mean_return.unwrap_or(f64::NAN),
+            mean_transition_return: it.mean_transition_return.unwrap_or(f64::NAN),
+        }
+    }
+}
+
+/// A finished run as read back: its record, evaluations and curve.
+#[derive(Clone, Debug)]
+pub struct Run {
+    pub file: RunFile,
+    pub eval: EvalReport,
+    pub deterministic: EvalReport,
+    pub curve: Vec<CurvePoint>,
+}
+
+/// A study folder with its finished runs.
+#[derive(Clone, Debug)]
+pub struct Study {
+    pub dir: PathBuf,
+    pub file: StudyFile,
+    /// Finished runs, by algorithm in the study's order, then seed.
+    pub runs: Vec<Run>,
+}
+
+/// The folder of one run.
+pub fn run_dir(study: &Path, algorithm: &str, seed: u64) -> PathBuf {
+    study.join(algorithm).join(format!("seed-{seed}"))
+}
+
+/// Writes `value` as pretty JSON with a final newline.
+pub fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let text = serde_json::to_string_pretty(value)? + "\n";
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: not a valid file", path.display()))
+}
+
+/// A number as the CSV holds it: empty for NaN, else Rust's shortest round-trip form.
+fn number(v: f64) -> String {
+    if v.is_nan() {
+        String::new()
+    } else {
+        format!("{v}")
+    }
+}
+
+/// The curve as CSV, header first.
+pub fn curve_csv(points: &[CurvePoint]) -> String {
+    let mut text = CURVE_COLUMNS.join(",") + "\n";
+    for p in points {
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{}\n",
+            p.iteration,
+            p.steps,
+            number(p.wall_s),
+            p.episodes,
+            p.successes,
+            number(p.success_rate_last_100),
+            number(p.mean_episode_length),
+            number(p.mean_return),
+            number(p.mean_transition_return),
+        ));
+    }
+    text
+}
+
+/// Reads `curve.csv` back; a file with other columns or a field that is not a number is an
+/// error naming the file, line and column.
+pub fn read_curve(path: &Path) -> anyhow::Result<Vec<CurvePoint>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or_default();
+    if header != CURVE_COLUMNS.join(",") {
+        bail!(
+            "{}: line 1: the header must be {:?}",
+            path.display(),
+            CURVE_COLUMNS.join(",")
+        );
+    }
+    lines
+        .enumerate()
+        .map(|(k, line)| {
+            let fields: Vec<&str> = line.split(',').collect();
+            if fields.len() != CURVE_COLUMNS.len() {
+                bail!(
+                    "{}: line {}: {} fields, {} expected",
+                    path.display(),
+                    k + 2,
+                    fields.len(),
+                    CURVE_COLUMNS.len()
+                );
+            }
+            let float = |i: usize| -> anyhow::Result<f64> {
+                if fields[i].is_empty() {
+                    return Ok(f64::NAN);
+                }
+                fields[i].parse().with_context(|| {
+                    format!(
+                        "{}: line {}: {}: {:?} is not a number",
+                        path.display(),
+                        k + 2,
+                        CURVE_COLUMNS[i],
+                        fields[i]
+                    )
+                })
+            };
+            let int = |i: usize| -> anyhow::Result<u64> {
+                fields[i].parse().with_context(|| {
+                    format!(
+                        "{}: line {}: {}: {:?} is not a count",
+                        path.display(),
+                        k + 2,
+                        CURVE_COLUMNS[i],
+                        fields[i]
+                    )
+                })
+            };
+            Ok(CurvePoint {
+                iteration: int(0)?,
+                steps: int(1)?,
+                wall_s: float(2)?,
+                episodes: int(3)?,
+                successes: int(4)?,
+                success_rate_last_100: float(5)?,
+                mean_episode_length: float(6)?,
+                mean_return: float(7)?,
+                mean_transition_return: float(8)?,
+            })
+        })
+        .collect()
+}
+
+impl Study {
+    /// Reads a study folder and every finished run in it.
+    pub fn read(dir: &Path) -> anyhow::Result<Self> {
+        let file: StudyFile = read_json(&dir.join("study.json"))?;
+        let mut runs = Vec::new();
+        for algorithm in &file.algorithms {
+            for &seed in &file.seeds {
+                let run = run_dir(dir, algorithm, seed);
+                if !run.join("run.json").exists() {
+                    continue;
+                }
+                runs.push(Run {
+                    file: read_json(&run.join("run.json"))?,
+                    eval: read_json(&run.join("eval.json"))?,
+                    deterministic: read_json(&run.join("eval-deterministic.json"))?,
+                    curve: read_curve(&run.join("curve.csv"))?,
+                });
+            }
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            file,
+            runs,
+        })
+    }
+
+    /// The finished runs of `algorithm`, by seed.
+    pub fn runs_of<'a>(&'a self, algorithm: &'a str) -> impl Iterator<Item = &'a Run> + 'a {
+        self.runs
+            .iter()
+            .filter(move |r| r.file.algorithm == algorithm)
+    }
+
+    /// Whether `algorithm`'s run of `seed` has finished.
+    pub fn finished(&self, algorithm: &str, seed: u64) -> bool {
+        self.runs
+            .iter()
+            .any(|r| r.file.algorithm == algorithm && r.file.seed == seed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_curve_reads_back_as_written_and_a_bad_field_is_named() {
+        let points = vec![
+            CurvePoint {
+                iteration: 1,
+                steps: 8192,
+                wall_s: 3.25,
+                episodes: 0,
+                successes: 0,
+                success_rate_last_100: 0.0,
+                mean_episode_length: f64::NAN,
+                mean_return: f64::NAN,
+                mean_transition_return: f64::NAN,
+            },
+            CurvePoint {
+                iteration: 2,
+                steps: 16384,
+                wall_s: 6.5,
+                episodes: 12,
+                successes: 5,
+                success_rate_last_100: 5.0 / 12.0,
+                mean_episode_length: 41.0 / 3.0,
+                mean_return: -0.1,
+                mean_transition_return: 1e-17,
+            },
+        ];
+        let dir = std::env::temp_dir().join(format!("crm-curve-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("curve.csv");
+        std::fs::write(&path, curve_csv(&points)).expect("write");
+        let back = read_curve(&path).expect("read");
+        assert_eq!(back.len(), 2);
+        assert!(back[0].mean_return.is_nan());
+        assert_eq!(back[1], points[1], "every value round-trips exactly");
+        std::fs::write(&path, curve_csv(&points).replace("6.5", "six")).expect("write");
+        let err = read_curve(&path).expect_err("a bad number").to_string();
+        assert!(err.contains("line 3") && err.contains("wall_s"), "{err}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
