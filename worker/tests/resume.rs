@@ -1,6 +1,7 @@
-//! A resumed run is the same run: `crm train` killed with SIGKILL after a checkpoint and
-//! resumed from it writes the same metrics, line for line (wall-clock aside), and the same
-//! final tensors, bit for bit, as the same run never interrupted.
+//! A resumed run is the same run: `crm train` killed with SIGKILL after a checkpoint, or
+//! stopped by SIGTERM (it checkpoints at the iteration's end and exits 0), and resumed from
+//! its checkpoint writes the same metrics, line for line (wall-clock aside), and the same final
+//! tensors, bit for bit, as the same run never interrupted.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -69,8 +70,15 @@ fn tensors(path: &Path) -> BTreeMap<String, Vec<u8>> {
         .collect()
 }
 
-fn check_resume_is_the_same_run(algorithm: &str) {
-    let dir = temp(algorithm);
+/// How the run is interrupted.
+#[derive(Clone, Copy, PartialEq)]
+enum Stop {
+    Kill,
+    Term,
+}
+
+fn check_resume_is_the_same_run(algorithm: &str, stop: Stop) {
+    let dir = temp(&format!("{algorithm}-{}", stop == Stop::Term));
     let config = dir.join("ppo.json");
     std::fs::write(&config, r#"{"rollout_steps": 384, "minibatch_size": 128}"#).expect("config");
     let whole = dir.join("whole");
@@ -105,8 +113,31 @@ fn check_resume_is_the_same_run(algorithm: &str) {
         assert!(started.elapsed() < Duration::from_secs(300), "too slow");
         std::thread::sleep(Duration::from_millis(5));
     }
-    child.kill().expect("SIGKILL");
-    child.wait().expect("reap");
+    match stop {
+        Stop::Kill => {
+            child.kill().expect("SIGKILL");
+            child.wait().expect("reap");
+        }
+        Stop::Term => {
+            let sent = Command::new("kill")
+                .args(["-TERM", &child.id().to_string()])
+                .status()
+                .expect("kill -TERM");
+            assert!(sent.success());
+            let asked = Instant::now();
+            let status = loop {
+                if let Some(status) = child.try_wait().expect("wait") {
+                    break status;
+                }
+                assert!(
+                    asked.elapsed() < Duration::from_secs(30),
+                    "no exit within 30 s of SIGTERM"
+                );
+                std::thread::sleep(Duration::from_millis(10));
+            };
+            assert!(status.success(), "SIGTERM exits 0: {status}");
+        }
+    }
     let header = crm_learn::Checkpoint::read_header(&checkpoint).expect("header");
     let state = header
         .state
@@ -143,10 +174,15 @@ fn check_resume_is_the_same_run(algorithm: &str) {
 
 #[test]
 fn a_crm_ppo_run_killed_and_resumed_is_the_same_run() {
-    check_resume_is_the_same_run("crm-ppo");
+    check_resume_is_the_same_run("crm-ppo", Stop::Kill);
 }
 
 #[test]
 fn an_lppo_run_killed_and_resumed_is_the_same_run() {
-    check_resume_is_the_same_run("lppo");
+    check_resume_is_the_same_run("lppo", Stop::Kill);
+}
+
+#[test]
+fn an_ippo_run_stopped_by_sigterm_and_resumed_is_the_same_run() {
+    check_resume_is_the_same_run("ippo", Stop::Term);
 }

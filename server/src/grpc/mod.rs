@@ -526,4 +526,26 @@ impl Coordinator for CoordinatorService {
         self.state.notify();
         Ok(Response::new(pb::CompleteReply {}))
     }
+
+    async fn release(
+        &self,
+        request: Request<pb::ReleaseRequest>,
+    ) -> Result<Response<pb::CompleteReply>, Status> {
+        let r = request.into_inner();
+        let hash = self
+            .require_lease(&r.worker_id, r.job_id, &r.lease_token)
+            .await?;
+        self.state
+            .store
+            .release(Lease::new(&r.worker_id, r.job_id, &hash))
+            .await
+            .map_err(status)?;
+        tracing::info!(
+            job = r.job_id,
+            worker = r.worker_id,
+            "job given back; queued again"
+        );
+        self.state.notify();
+        Ok(Response::new(pb::CompleteReply {}))
+    }
 }

@@ -573,6 +573,25 @@ impl Store {
     }
 
     /// Ends a job under its current lease: `state` is `succeeded` or `failed`.
+    /// Gives a running job back to the queue at once (its worker was preempted or is
+    /// stopping); the next lease resumes it from its newest checkpoint.
+    pub async fn release(&self, lease: Lease<'_>) -> Result<()> {
+        let done = sqlx::query("UPDATE jobs SET state = 'queued', worker_id = NULL, lease_expires_at = NULL, phase = NULL WHERE id = ? AND worker_id = ? AND lease_hash = ? AND state = 'running'")
+            .bind(lease.job)
+            .bind(lease.worker)
+            .bind(lease.hash)
+            .execute(&self.pool)
+            .await?;
+        if done.rows_affected() == 0 {
+            let now: Option<String> = sqlx::query_scalar("SELECT state FROM jobs WHERE id = ?")
+                .bind(lease.job)
+                .fetch_optional(&self.pool)
+                .await?;
+            return Err(now.map_or(StoreError::NotFound, StoreError::Conflict));
+        }
+        Ok(())
+    }
+
     pub async fn finish(
         &self,
         lease: Lease<'_>,

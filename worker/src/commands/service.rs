@@ -18,7 +18,8 @@ pub struct WorkerFlags {
     /// Environments per training job when the job does not say (default: one per core).
     #[arg(long)]
     pub envs: Option<usize>,
-    /// This worker's name (default: the host name).
+    /// This worker's name (default: the Slurm job's id, `slurm-JOB` or `slurm-JOB_TASK` in
+    /// an array, else the host name).
     #[arg(long)]
     pub name: Option<String>,
     /// The CA certificate (PEM) that signed the coordinator's TLS certificate, for an
@@ -40,11 +41,28 @@ impl WorkerFlags {
             token,
             ca: self.ca.clone(),
             worlds,
-            name: self.name.clone().unwrap_or_else(host_name),
+            name: self.name.clone().unwrap_or_else(default_name),
             checkpoint_every_s: self.checkpoint_every_s,
             poll_s: self.poll_s.clamp(0.05, 60.0),
             envs: self.envs,
+            max_jobs: None,
+            idle_exit_s: None,
         }
+    }
+}
+
+/// A worker's name when none is given: the scheduler's job (Slurm's array job and task, or
+/// its job id), else the host's name.
+fn default_name() -> String {
+    let var = |name: &str| std::env::var(name).ok().filter(|v| !v.is_empty());
+    match (
+        var("SLURM_ARRAY_JOB_ID"),
+        var("SLURM_ARRAY_TASK_ID"),
+        var("SLURM_JOB_ID"),
+    ) {
+        (Some(array), Some(task), _) => format!("slurm-{array}_{task}"),
+        (_, _, Some(job)) => format!("slurm-{job}"),
+        _ => host_name(),
     }
 }
 
@@ -84,6 +102,23 @@ pub struct WorkerArgs {
     pub worlds: Option<PathBuf>,
     #[command(flatten)]
     pub worker: WorkerFlags,
+    /// A file holding the coordinator's token (a batch system copies the environment, and
+    /// with it `CRM_TOKEN`, into its records; a file readable by the user alone does not
+    /// leak).
+    #[arg(long, value_name = "FILE", conflicts_with = "token")]
+    pub token_file: Option<PathBuf>,
+    /// Exit (0) after this many jobs.
+    #[arg(long, value_name = "N")]
+    pub max_jobs: Option<u64>,
+    /// Exit (0) after this many seconds without a job: a pool of batch jobs shrinks as the
+    /// queue empties.
+    #[arg(long, value_name = "SECONDS")]
+    pub idle_exit_s: Option<f64>,
+    /// Seconds a stopping worker (SIGTERM, SIGINT) has to checkpoint and give its job back
+    /// before it exits anyway. Default 25: under Slurm's default `KillWait` of 30 s between
+    /// SIGTERM and SIGKILL (Kubernetes' `terminationGracePeriodSeconds` default is 30 too).
+    #[arg(long, value_name = "SECONDS", default_value_t = 25.0)]
+    pub grace_s: f64,
 }
 
 #[derive(clap::Args, Debug)]
@@ -132,10 +167,35 @@ pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     if args.token.as_deref() == Some("") {
         anyhow::bail!("--token must not be empty");
     }
-    worker_main(
-        args.worker
-            .options(args.coordinator, args.token, args.worlds),
-    )
+    let token = match &args.token_file {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| anyhow::anyhow!("--token-file {}: {e}", path.display()))?;
+            let token = text.trim().to_string();
+            if token.is_empty() {
+                anyhow::bail!("--token-file {}: the file is empty", path.display());
+            }
+            Some(token)
+        }
+        None => args.token,
+    };
+    for (flag, value) in [
+        ("--idle-exit-s", args.idle_exit_s),
+        ("--grace-s", Some(args.grace_s)),
+    ] {
+        if value.is_some_and(|v| !(v.is_finite() && v >= 0.0)) {
+            anyhow::bail!("{flag} must be a number of seconds >= 0");
+        }
+    }
+    if args.max_jobs == Some(0) {
+        anyhow::bail!("--max-jobs must be at least 1");
+    }
+    let options = WorkerOptions {
+        max_jobs: args.max_jobs,
+        idle_exit_s: args.idle_exit_s,
+        ..args.worker.options(args.coordinator, token, args.worlds)
+    };
+    worker_main(options, args.grace_s)
 }
 
 pub fn serve_policy(args: ServePolicyArgs) -> anyhow::Result<()> {

@@ -189,7 +189,19 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     bar.set_position(trainer.steps().min(total));
+    // SIGTERM or SIGINT: stop at the end of the iteration with a checkpoint to resume from.
+    let stop = crate::service::stop_on_signals()?;
     while !trainer.finished() {
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            trainer.save(&checkpoint)?;
+            bar.abandon();
+            eprintln!(
+                "stopped at {} steps: resume with --resume {}",
+                trainer.steps(),
+                checkpoint.display()
+            );
+            return Ok(());
+        }
         let it = trainer.iterate()?;
         writeln!(metrics, "{}", serde_json::to_string(&it)?)?;
         let mix: Vec<String> = it

@@ -221,4 +221,17 @@ impl Client {
             .await?;
         Ok(())
     }
+
+    /// Gives the job back to the queue unfinished (this worker is stopping).
+    pub async fn release(&self, job: i64) -> anyhow::Result<()> {
+        self.inner
+            .clone()
+            .release(pb::ReleaseRequest {
+                worker_id: self.worker_id.clone(),
+                job_id: job,
+                lease_token: self.lease_token.clone(),
+            })
+            .await?;
+        Ok(())
+    }
 }

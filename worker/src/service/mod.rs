@@ -34,11 +34,19 @@ pub struct WorkerOptions {
     pub envs: Option<usize>,
     /// The folder of world folders this worker can run besides the built-in world.
     pub worlds: Option<std::path::PathBuf>,
+    /// Exit after this many jobs (a batch allocation that should end with its work).
+    pub max_jobs: Option<u64>,
+    /// Exit after this many seconds without a job (an elastic pool shrinks with the queue).
+    pub idle_exit_s: Option<f64>,
 }
 
-/// Leases and runs jobs until `stop` is set. Reconnects when the coordinator goes away.
+/// Leases and runs jobs until `stop` is set (a running job then ends where it can be resumed
+/// and goes back to the queue), `max_jobs` have run or the queue has been empty for
+/// `idle_exit_s`. Reconnects when the coordinator goes away.
 pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
     let mut backoff = Duration::from_millis(200);
+    let mut jobs = 0u64;
+    let mut idle_since = std::time::Instant::now();
     while !stop.load(Ordering::Relaxed) {
         let connected = Client::connect(
             &options.coordinator,
@@ -92,6 +100,17 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
             if stop.load(Ordering::Relaxed) {
                 return Ok(());
             }
+            if options.max_jobs.is_some_and(|most| jobs >= most) {
+                tracing::info!(jobs, "ran --max-jobs jobs; exiting");
+                return Ok(());
+            }
+            if options
+                .idle_exit_s
+                .is_some_and(|s| idle_since.elapsed().as_secs_f64() >= s)
+            {
+                tracing::info!("no job for --idle-exit-s seconds; exiting");
+                return Ok(());
+            }
             let lease = client
                 .inner
                 .lease(pb::LeaseRequest {
@@ -108,10 +127,12 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
                             lease_token: job.lease_token.clone(),
                             ..client.clone()
                         };
-                        if let Err(err) = run::run_job(&leased, &options, job).await {
+                        if let Err(err) = run::run_job(&leased, &options, job, &stop).await {
                             tracing::error!(job = id, err = format!("{err:#}"), "job failed");
                             leased.fail(id, &format!("{err:#}")).await.ok();
                         }
+                        jobs += 1;
+                        idle_since = std::time::Instant::now();
                     }
                     None => tokio::time::sleep(Duration::from_secs_f64(options.poll_s)).await,
                 },
@@ -129,17 +150,34 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
     Ok(())
 }
 
-/// `crm worker`'s entry: runs until ctrl-c.
-pub fn worker_main(options: WorkerOptions) -> anyhow::Result<()> {
+/// `crm worker`'s entry: runs until SIGTERM or SIGINT (or `--max-jobs`, `--idle-exit-s`).
+/// The first signal stops it: a training job ends at its next iteration boundary with a
+/// checkpoint upload, an evaluation at once, the job goes back to the queue and the worker
+/// exits 0, within `grace_s` seconds at most (then it exits anyway, and the job waits for its
+/// lease to expire). A second signal exits at once.
+pub fn worker_main(options: WorkerOptions, grace_s: f64) -> anyhow::Result<()> {
     crm_server::init_logging();
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let result = runtime.block_on(async move {
         let stop = Arc::new(AtomicBool::new(false));
+        let mut signals = Signals::new()?;
+        let worker = run_worker(options, stop.clone());
+        tokio::pin!(worker);
         tokio::select! {
-            result = run_worker(options, stop.clone()) => result,
-            _ = tokio::signal::ctrl_c() => {
+            result = &mut worker => return result,
+            name = signals.next() => {
                 stop.store(true, Ordering::Relaxed);
-                tracing::info!("stopping; a running job is re-queued when its lease expires");
+                tracing::info!(signal = name, grace_s, "stopping: the running job ends where it can resume and is queued again");
+            }
+        }
+        tokio::select! {
+            result = &mut worker => result,
+            name = signals.next() => {
+                tracing::warn!(signal = name, "a second signal: exiting at once");
+                std::process::exit(1);
+            }
+            _ = tokio::time::sleep(Duration::from_secs_f64(grace_s)) => {
+                tracing::warn!(grace_s, "the job did not stop within the grace period; exiting (it is queued again when its lease expires)");
                 Ok(())
             }
         }
@@ -147,4 +185,54 @@ pub fn worker_main(options: WorkerOptions) -> anyhow::Result<()> {
     // Do not wait for a job's blocking thread (see `up_main`).
     runtime.shutdown_timeout(Duration::from_secs(2));
     result
+}
+
+/// A flag the first SIGTERM or SIGINT sets, for a synchronous command that stops at its next
+/// safe point (`crm train`); a second signal exits at once.
+pub fn stop_on_signals() -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the signal listener")?;
+    let mut signals = runtime.block_on(async { Signals::new() })?;
+    let flag = stop.clone();
+    std::thread::spawn(move || {
+        runtime.block_on(async move {
+            let name = signals.next().await;
+            eprintln!(
+                "{name}: stopping at the end of this iteration (a second signal exits at once)"
+            );
+            flag.store(true, Ordering::Relaxed);
+            let name = signals.next().await;
+            eprintln!("{name}: exiting at once");
+            std::process::exit(1);
+        })
+    });
+    Ok(stop)
+}
+
+/// SIGTERM (`scancel`, a batch system's time limit, `docker stop`, Kubernetes) and SIGINT
+/// (ctrl-c), as one stream.
+pub struct Signals {
+    term: tokio::signal::unix::Signal,
+    int: tokio::signal::unix::Signal,
+}
+
+impl Signals {
+    pub fn new() -> anyhow::Result<Self> {
+        use tokio::signal::unix::{SignalKind, signal};
+        Ok(Self {
+            term: signal(SignalKind::terminate()).context("listening for SIGTERM")?,
+            int: signal(SignalKind::interrupt()).context("listening for SIGINT")?,
+        })
+    }
+
+    /// The next signal's name.
+    pub async fn next(&mut self) -> &'static str {
+        tokio::select! {
+            _ = self.term.recv() => "SIGTERM",
+            _ = self.int.recv() => "SIGINT",
+        }
+    }
 }

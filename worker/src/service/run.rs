@@ -1,6 +1,8 @@
 //! Running one leased job: heartbeats on a timer (a cancelled or lost lease stops the job),
 //! progress on a client stream, checkpoints uploaded periodically and at the end; training
-//! resumes from the checkpoint the lease names. The learning itself runs on a blocking
+//! resumes from the checkpoint the lease names. A worker that is stopping (SIGTERM, SIGINT)
+//! ends a training job at the next iteration boundary with a checkpoint upload, an evaluation
+//! at once, and gives the job back to the queue. The learning itself runs on a blocking
 //! thread (it uses rayon for the environments).
 
 use std::path::{Path, PathBuf};
@@ -36,6 +38,8 @@ struct Link {
     handle: tokio::runtime::Handle,
     progress: mpsc::Sender<pb::Progress>,
     cancelled: Arc<AtomicBool>,
+    /// The worker is stopping: end the job where it can be resumed and give it back.
+    preempted: Arc<AtomicBool>,
 }
 
 impl Link {
@@ -50,13 +54,24 @@ impl Link {
             .map_err(|_| anyhow::anyhow!("the progress stream closed (lease lost?)"))
     }
 
+    /// Whether the job must end now: cancelled, its lease lost, or the worker stopping.
     fn stopped(&self) -> bool {
-        self.cancelled.load(Ordering::Relaxed)
+        self.cancelled.load(Ordering::Relaxed) || self.preempted()
+    }
+
+    fn preempted(&self) -> bool {
+        self.preempted.load(Ordering::Relaxed)
     }
 }
 
-/// Runs `job` to its end: completes it, or returns the error for the caller to report.
-pub async fn run_job(client: &Client, options: &WorkerOptions, job: pb::Job) -> anyhow::Result<()> {
+/// Runs `job` to its end: completes it, gives it back when `stopping` is set meanwhile (the
+/// next lease resumes it), or returns the error for the caller to report.
+pub async fn run_job(
+    client: &Client,
+    options: &WorkerOptions,
+    job: pb::Job,
+    stopping: &Arc<AtomicBool>,
+) -> anyhow::Result<()> {
     let id = job.job_id;
     tracing::info!(
         job = id,
@@ -113,6 +128,7 @@ pub async fn run_job(client: &Client, options: &WorkerOptions, job: pb::Job) -> 
         handle: tokio::runtime::Handle::current(),
         progress: tx,
         cancelled: cancelled.clone(),
+        preempted: stopping.clone(),
     };
     let dir = scratch.0.clone();
     let options = options.clone();
@@ -134,6 +150,11 @@ pub async fn run_job(client: &Client, options: &WorkerOptions, job: pb::Job) -> 
     }
     match result {
         Some(value) => client.complete(id, &value).await,
+        None if stopping.load(Ordering::Relaxed) && !cancelled.load(Ordering::Relaxed) => {
+            client.release(id).await?;
+            tracing::info!(job = id, "stopping: the job is queued again");
+            Ok(())
+        }
         None => {
             tracing::info!(job = id, "stopped");
             Ok(())
@@ -247,6 +268,10 @@ fn train(
     };
     while !trainer.finished() {
         if link.stopped() {
+            if link.preempted() && !link.cancelled.load(Ordering::Relaxed) {
+                // Stopping: the run's state so far, for whoever leases the job next.
+                upload(&trainer)?;
+            }
             return Ok(None);
         }
         let it = trainer.iterate()?;

@@ -171,6 +171,8 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
             poll_s: 0.5,
             envs: None,
             worlds: args.worlds.clone(),
+            max_jobs: None,
+            idle_exit_s: None,
         };
         let stop = stop.clone();
         runtime.spawn(async move {

@@ -1,0 +1,141 @@
+//! Workers that a cluster can start and stop: SIGTERM ends a training job at the iteration's
+//! end with a checkpoint and gives it back at once (no lease to wait out), the worker exits 0,
+//! and the next worker's resumed run is the same run as one never interrupted; `--max-jobs`,
+//! `--idle-exit-s` and a name from the scheduler's environment.
+
+mod support;
+
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use support::*;
+
+/// A job long enough to be stopped midway (the early stop cannot end it first).
+const TRAIN: &str = r#"{"kind": "train", "algorithm": "crm-ppo", "tasks": ["mouse-press", "mug-wrap"], "steps": 6144, "seed": 5, "envs": 2, "curriculum": true, "config": {"rollout_steps": 512, "minibatch_size": 128, "early_stop_window": 1000000}}"#;
+
+/// A run's metrics without their wall-clock fields.
+fn metrics(addr: &str, id: i64) -> Vec<Value> {
+    get(addr, &format!("/api/v1/runs/{id}/metrics"))["metrics"]
+        .as_array()
+        .expect("metrics")
+        .iter()
+        .map(|m| {
+            let mut data = m["data"].clone();
+            let map = data.as_object_mut().expect("an iteration");
+            map.remove("wall_s");
+            map.remove("steps_per_s");
+            data
+        })
+        .collect()
+}
+
+fn exit_within(proc: &mut Proc, secs: u64) -> std::process::ExitStatus {
+    let started = Instant::now();
+    loop {
+        if let Some(status) = proc.0.try_wait().expect("wait") {
+            return status;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(secs),
+            "the worker did not exit within {secs} s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_preempted_workers_job_is_given_back_and_resumed_as_the_same_run() {
+    let data = TempDir::new("preempt");
+    // The default lease of 30 s: a job given back is queued long before it would expire.
+    let server = start_server(&data.0, &[]);
+    let addr = server.http.clone();
+    let grpc = format!("http://{}", server.grpc);
+    let mut first = start_worker(&grpc, &["--checkpoint-every-s", "1000", "--name", "first"]);
+    let id = submit(&addr, TRAIN)["id"].as_i64().expect("id");
+    wait_for(240, "three iterations", || {
+        (metrics(&addr, id).len() >= 3).then_some(())
+    });
+    let sent = Command::new("kill")
+        .args(["-TERM", &first.0.id().to_string()])
+        .status()
+        .expect("kill -TERM");
+    assert!(sent.success());
+    let asked = Instant::now();
+    let status = exit_within(&mut first, 25);
+    assert!(status.success(), "SIGTERM exits 0: {status}");
+    let job = wait_state(&addr, id, "queued", 5);
+    assert!(
+        asked.elapsed() < Duration::from_secs(20),
+        "given back, not left to its lease"
+    );
+    assert_eq!(job["attempts"], 1);
+    let saved = get(&addr, &format!("/api/v1/checkpoints?job_id={id}"));
+    let stopped_at = saved["checkpoints"][0]["steps"]
+        .as_i64()
+        .expect("the stopping worker's checkpoint");
+    assert!(stopped_at > 0 && stopped_at < 6144, "{saved}");
+
+    // A worker named by the scheduler runs it on, then the same job again from scratch, and
+    // leaves after its two jobs.
+    let mut second = Proc(
+        Command::new(crm())
+            .args(["worker", "--coordinator", &grpc, "--poll-s", "0.2"])
+            .args(["--max-jobs", "2", "--checkpoint-every-s", "1000"])
+            .env("SLURM_JOB_ID", "4242")
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("crm worker"),
+    );
+    let done = wait_state(&addr, id, "succeeded", 300);
+    assert_eq!(done["attempts"], 2);
+    assert_eq!(done["result"]["resumed_from_steps"], stopped_at);
+    let reference = submit(&addr, TRAIN)["id"].as_i64().expect("id");
+    wait_state(&addr, reference, "succeeded", 300);
+    assert!(
+        exit_within(&mut second, 30).success(),
+        "--max-jobs 2 exits 0"
+    );
+    let (resumed, whole) = (metrics(&addr, id), metrics(&addr, reference));
+    assert_eq!(resumed.len(), 12, "one entry per iteration");
+    assert_eq!(resumed.len(), whole.len());
+    for (k, (a, b)) in resumed.iter().zip(&whole).enumerate() {
+        assert_eq!(a, b, "iteration {}", k + 1);
+    }
+    let download = |job: i64| {
+        let checkpoint = get(&addr, &format!("/api/v1/jobs/{job}"))["result"]["checkpoint_id"]
+            .as_i64()
+            .expect("final checkpoint");
+        let file = http(
+            &addr,
+            "GET",
+            &format!("/api/v1/checkpoints/{checkpoint}/download"),
+            None,
+            None,
+        );
+        safetensors::SafeTensors::deserialize(&file.body)
+            .expect("safetensors")
+            .tensors()
+            .into_iter()
+            .map(|(name, view)| (name, view.data().to_vec()))
+            .collect::<std::collections::BTreeMap<_, _>>()
+    };
+    assert!(
+        download(id) == download(reference),
+        "the final tensors differ"
+    );
+
+    // An idle worker leaves by itself.
+    let mut idle = start_worker(&grpc, &["--idle-exit-s", "1", "--name", "idle"]);
+    assert!(exit_within(&mut idle, 20).success());
+    let workers = get(&addr, "/api/v1/workers");
+    let names: Vec<&str> = workers["workers"]
+        .as_array()
+        .expect("workers")
+        .iter()
+        .filter_map(|w| w["name"].as_str())
+        .collect();
+    assert_eq!(names, ["first", "slurm-4242", "idle"]);
+}
