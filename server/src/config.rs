@@ -105,6 +105,9 @@ pub struct ServerConfig {
     /// built-in world; workers need the same folders (`crm worker --worlds`).
     #[arg(long, value_name = "DIR")]
     pub worlds: Option<PathBuf>,
+    /// Workers started through a batch system (`launch` in a config file).
+    #[command(flatten)]
+    pub launch: crate::launcher::LaunchConfig,
 }
 
 /// Debug without the tokens' values: a token shows as `<set>`, so a logged configuration
@@ -139,6 +142,7 @@ impl std::fmt::Debug for ServerConfig {
             .field("models", &self.models)
             .field("max_sweep_jobs", &self.max_sweep_jobs)
             .field("worlds", &self.worlds)
+            .field("launch", &self.launch)
             .finish()
     }
 }
@@ -173,6 +177,7 @@ impl Default for ServerConfig {
             models: PathBuf::from("models"),
             max_sweep_jobs: 200,
             worlds: None,
+            launch: crate::launcher::LaunchConfig::default(),
         }
     }
 }

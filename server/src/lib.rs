@@ -10,6 +10,7 @@ pub mod charts;
 pub mod config;
 pub mod errors;
 pub mod grpc;
+pub mod launcher;
 pub mod listen;
 pub mod secrets;
 pub mod store;
@@ -191,13 +192,26 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
             }
         }
     });
+    let mut tasks = vec![http_task, grpc_task, sweeper];
+    // Workers through a batch system while jobs wait (`--launcher`).
+    if let Some(launcher) = launcher::Launcher::new(&state, grpc_addr, identity.is_some())? {
+        tracing::info!(
+            name = launcher.job_name(),
+            "launcher: workers start through Slurm"
+        );
+        let (state, stop) = (state.clone(), shutdown.clone());
+        tasks.push(tokio::spawn(async move {
+            launcher.run(state, stop).await;
+            anyhow::Ok(())
+        }));
+    }
     tracing::info!(%http_addr, %grpc_addr, data = %config.data_dir.display(), "coordinator up");
     Ok(Running {
         http_addr,
         grpc_addr,
         tls: identity.is_some(),
         state,
-        tasks: vec![http_task, grpc_task, sweeper],
+        tasks,
         shutdown,
     })
 }

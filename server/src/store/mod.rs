@@ -573,6 +573,16 @@ impl Store {
     }
 
     /// Ends a job under its current lease: `state` is `succeeded` or `failed`.
+    /// How many jobs are queued and how many running: the workers the queue wants.
+    pub async fn open_jobs(&self) -> Result<(u64, u64)> {
+        let (queued, running): (i64, i64) = sqlx::query_as(
+            "SELECT COALESCE(SUM(state = 'queued'), 0), COALESCE(SUM(state = 'running'), 0) FROM jobs",
+        )
+        .fetch_one(&self.pool)
+        .await?;
+        Ok((queued as u64, running as u64))
+    }
+
     /// Gives a running job back to the queue at once (its worker was preempted or is
     /// stopping); the next lease resumes it from its newest checkpoint.
     pub async fn release(&self, lease: Lease<'_>) -> Result<()> {
