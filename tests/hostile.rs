@@ -387,6 +387,10 @@ fn a_flood_of_hostile_clients_leaves_the_coordinator_answering() {
             models.to_str().expect("utf-8"),
             "--max-connections",
             "8000",
+            // The flood is one client's: room for it under the per-client cap too (that cap
+            // has its own test below).
+            "--max-connections-per-client",
+            "8000",
             // Nothing is cut while the flood is being opened (it takes seconds).
             "--header-timeout-s",
             "60",
@@ -490,4 +494,90 @@ fn a_flood_of_hostile_clients_leaves_the_coordinator_answering() {
     );
     assert!(peak < 300 * 1024, "RSS {} MB", peak / 1024);
     drop(flood);
+}
+
+/// A connection from `from` (a loopback address) to `to`.
+fn connect_from(from: &str, to: &str) -> std::net::TcpStream {
+    let socket =
+        socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).expect("socket");
+    let local: std::net::SocketAddr = format!("{from}:0").parse().expect("address");
+    socket.bind(&local.into()).expect("bind");
+    let remote: std::net::SocketAddr = to.parse().expect("address");
+    socket.connect(&remote.into()).expect("connect");
+    socket.into()
+}
+
+/// One client holding thousands of idle and slow connections cannot keep another client from
+/// an answer: connections are capped per client address (as nginx's `limit_conn`), and one
+/// that sends nothing is closed after the header timeout, not the idle timeout.
+#[test]
+fn one_client_holding_thousands_of_connections_leaves_another_answered() {
+    use std::io::{Read, Write};
+    use std::time::{Duration, Instant};
+    let data = TempDir::new("hostile-fair");
+    // The defaults: 64 connections per client, 10 s for a first request.
+    let server = start_server(&data.0, &[]);
+    let addr = server.http.clone();
+    let started = Instant::now();
+    let mut hostile = Vec::new();
+    let mut refused = 0;
+    for k in 0..3000 {
+        let mut stream = connect_from("127.0.0.1", &addr);
+        if k % 2 == 1 {
+            let _ = stream.write_all(b"GET /api/v1/jobs HTTP/1.1\r\nHost: x\r\nX-Slow: ");
+        }
+        hostile.push(stream);
+    }
+    // Past its 64, the hostile client's connections are answered 503 and closed at once.
+    for stream in hostile.iter_mut().skip(2900) {
+        stream
+            .set_read_timeout(Some(Duration::from_secs(2)))
+            .expect("timeout");
+        let mut reply = String::new();
+        let _ = stream.read_to_string(&mut reply);
+        if reply.starts_with("HTTP/1.1 503") {
+            refused += 1;
+        }
+    }
+    assert_eq!(refused, 100, "the last 100 of 3,000 connections refused");
+    eprintln!(
+        "3,000 connections from 127.0.0.1 opened in {:?}",
+        started.elapsed()
+    );
+    // Another client is answered, within a second, while the first holds its connections.
+    for _ in 0..5 {
+        let asked = Instant::now();
+        let mut other = connect_from("127.0.0.2", &addr);
+        other
+            .write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+            .expect("ask");
+        let mut reply = String::new();
+        other.read_to_string(&mut reply).expect("answer");
+        assert!(reply.starts_with("HTTP/1.1 200"), "{reply}");
+        assert!(
+            asked.elapsed() < Duration::from_secs(1),
+            "{:?}",
+            asked.elapsed()
+        );
+    }
+    drop(hostile);
+    // A connection that sends nothing is closed after the header timeout (here 2 s), long
+    // before the idle timeout (60 s).
+    let quick = TempDir::new("hostile-silent");
+    let server = start_server(
+        &quick.0,
+        &["--header-timeout-s", "2", "--idle-timeout-s", "60"],
+    );
+    let opened = Instant::now();
+    let mut silent = connect_from("127.0.0.3", &server.http);
+    silent
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .expect("timeout");
+    let mut nothing = Vec::new();
+    let _ = silent.read_to_end(&mut nothing);
+    let waited = opened.elapsed();
+    assert!(
+        waited >= Duration::from_secs(1) && waited < Duration::from_secs(5),
+        "closed after {waited:?}"
+    );
 }

@@ -69,12 +69,19 @@ pub struct ServerConfig {
     /// gets (1,024 at the least), so accepting never fails for want of them.
     #[arg(long, default_value_t = 512)]
     pub max_connections: usize,
+    /// Open connections from one client address, on each listener (nginx's `limit_conn` per
+    /// address); one beyond is answered 503 and closed, so one client cannot hold every
+    /// connection. Default 64: a browser opens at most 6 per host (Chromium's limit) and a
+    /// worker one or two, with room for scripts and event streams.
+    #[arg(long, default_value_t = 64)]
+    pub max_connections_per_client: usize,
     /// Event streams (`GET /api/v1/events`) open at once; one beyond is answered 503 with
     /// `Retry-After`. Default 64: a page holds one, so 64 browser tabs.
     #[arg(long, default_value_t = 64)]
     pub max_event_streams: usize,
-    /// Seconds a REST client has to send a request's headers. Default 10 (nginx's
-    /// `client_header_timeout` is 60; a browser sends its headers at once).
+    /// Seconds a client has to send a request's headers (and a new connection its first
+    /// byte, on both listeners). Default 10 (nginx's `client_header_timeout` is 60; a browser
+    /// sends its headers at once).
     #[arg(long, default_value_t = 10)]
     pub header_timeout_s: u32,
     /// Seconds a REST connection may read and write nothing before it is closed. Default 60
@@ -132,6 +139,10 @@ impl std::fmt::Debug for ServerConfig {
             .field("max_body_bytes", &self.max_body_bytes)
             .field("max_concurrent_requests", &self.max_concurrent_requests)
             .field("max_connections", &self.max_connections)
+            .field(
+                "max_connections_per_client",
+                &self.max_connections_per_client,
+            )
             .field("max_event_streams", &self.max_event_streams)
             .field("header_timeout_s", &self.header_timeout_s)
             .field("idle_timeout_s", &self.idle_timeout_s)
@@ -167,6 +178,7 @@ impl Default for ServerConfig {
             max_body_bytes: 256 * 1024,
             max_concurrent_requests: 256,
             max_connections: 512,
+            max_connections_per_client: 64,
             max_event_streams: 64,
             header_timeout_s: 10,
             idle_timeout_s: 60,

@@ -142,6 +142,7 @@ pub async fn start(config: ServerConfig) -> anyhow::Result<Running> {
     let stop = shutdown.clone();
     let limits = listen::Limits {
         max_connections: config.max_connections.max(1),
+        per_client: config.max_connections_per_client.max(1),
         header_timeout: std::time::Duration::from_secs(config.header_timeout_s.max(1).into()),
         idle_timeout: std::time::Duration::from_secs(config.idle_timeout_s.max(1).into()),
     };

@@ -1,19 +1,22 @@
 //! The REST listener with connection hygiene, where `axum::serve` has none (axum 0.8.9: no
 //! header-read timeout, since hyper's needs a timer it does not set; no idle timeout; no cap,
 //! so idle sockets exhausted the process's file descriptors and accept errors stopped
-//! `/healthz`). Each connection gets hyper's header-read timeout and an idle timeout (nothing
-//! read or written); beyond `max_connections` open ones a connection is answered 503 with
-//! `Retry-After` and closed; an accept error (out of descriptors) is logged and retried, never
+//! `/healthz`). Each connection gets hyper's header-read timeout, a deadline for its first
+//! byte and an idle timeout (nothing read or written); beyond `max_connections` open ones, or
+//! `per_client` from one address (so that one client cannot hold them all), a connection is
+//! answered 503 with `Retry-After` and closed; an accept error (out of descriptors) is logged and retried, never
 //! fatal. Shutdown lets open connections finish their requests. The gRPC listener's
 //! connections ([`grpc_incoming`]) are capped and closed when idle the same way (a worker
 //! heartbeats every few seconds). With `--tls-cert`, each REST connection is a TLS stream
 //! (rustls; the handshake gets the header timeout), and each request carries its client's
 //! address for the rate limit (`api/rate.rs`).
 
+use std::collections::HashMap;
 use std::future::Future;
 use std::io;
+use std::net::IpAddr;
 use std::pin::Pin;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
 
@@ -32,6 +35,8 @@ use crate::api::rate::ClientAddr;
 #[derive(Clone, Copy, Debug)]
 pub struct Limits {
     pub max_connections: usize,
+    /// Open connections from one client address.
+    pub per_client: usize,
     /// Longest wait for a request's headers, from the first byte of the connection or the
     /// end of the previous request.
     pub header_timeout: Duration,
@@ -56,6 +61,7 @@ pub async fn serve(
 ) {
     let acceptor = tls.map(tokio_rustls::TlsAcceptor::from);
     let permits = Arc::new(Semaphore::new(limits.max_connections));
+    let clients = Clients::default();
     let (close, closing) = watch::channel(false);
     let mut stop = std::pin::pin!(stop);
     loop {
@@ -64,7 +70,7 @@ pub async fn serve(
             () = &mut stop => break,
         };
         let client = stream.peer_addr().ok();
-        let guarded = match Guarded::new(stream, &permits, limits.idle_timeout) {
+        let guarded = match Guarded::new(stream, &permits, &clients, limits) {
             Ok(guarded) => guarded,
             Err(stream) => {
                 tokio::spawn(refuse(stream));
@@ -145,10 +151,11 @@ pub fn grpc_incoming(
 ) -> tokio_stream::wrappers::ReceiverStream<io::Result<Guarded>> {
     let (send, receive) = mpsc::channel(16);
     let permits = Arc::new(Semaphore::new(limits.max_connections));
+    let clients = Clients::default();
     tokio::spawn(async move {
         loop {
             let stream = accept(&listener).await;
-            let Ok(guarded) = Guarded::new(stream, &permits, limits.idle_timeout) else {
+            let Ok(guarded) = Guarded::new(stream, &permits, &clients, limits) else {
                 tracing::warn!("too many gRPC connections; one closed");
                 continue;
             };
@@ -187,30 +194,82 @@ async fn refuse(mut stream: TcpStream) {
     .await;
 }
 
-/// A connection holding its place under the cap, which fails with `TimedOut` once nothing
-/// has been read or written for `timeout`.
+/// Open connections per client address.
+#[derive(Clone, Default)]
+struct Clients(Arc<Mutex<HashMap<IpAddr, usize>>>);
+
+/// One connection's place in its client's count, given back on drop.
+struct ClientSlot {
+    clients: Clients,
+    ip: IpAddr,
+}
+
+impl Clients {
+    /// A place for one more connection from `ip`, unless it holds `most` already.
+    fn take(&self, ip: IpAddr, most: usize) -> Option<ClientSlot> {
+        let mut counts = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let count = counts.entry(ip).or_insert(0);
+        if *count >= most {
+            return None;
+        }
+        *count += 1;
+        Some(ClientSlot {
+            clients: self.clone(),
+            ip,
+        })
+    }
+}
+
+impl Drop for ClientSlot {
+    fn drop(&mut self) {
+        let mut counts = self.clients.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(count) = counts.get_mut(&self.ip) {
+            *count -= 1;
+            if *count == 0 {
+                counts.remove(&self.ip);
+            }
+        }
+    }
+}
+
+/// A connection holding its place under the caps, which fails with `TimedOut` once nothing
+/// has been read or written for `timeout`, or when its first byte has not come within the
+/// header timeout.
 pub struct Guarded {
     stream: TcpStream,
     timeout: Duration,
     deadline: Pin<Box<Sleep>>,
+    /// Until the first byte arrives.
+    first_byte: Option<Pin<Box<Sleep>>>,
     _permit: OwnedSemaphorePermit,
+    _slot: Option<ClientSlot>,
 }
 
 impl Guarded {
-    /// `stream` with a place under the cap, or back when there is none.
+    /// `stream` with a place under the caps, or back when there is none.
     fn new(
         stream: TcpStream,
         permits: &Arc<Semaphore>,
-        timeout: Duration,
+        clients: &Clients,
+        limits: Limits,
     ) -> Result<Self, TcpStream> {
+        let slot = match stream.peer_addr() {
+            Ok(addr) => match clients.take(addr.ip(), limits.per_client) {
+                Some(slot) => Some(slot),
+                None => return Err(stream),
+            },
+            Err(_) => None,
+        };
         let Ok(permit) = permits.clone().try_acquire_owned() else {
             return Err(stream);
         };
         Ok(Self {
             stream,
-            timeout,
-            deadline: Box::pin(tokio::time::sleep(timeout)),
+            timeout: limits.idle_timeout,
+            deadline: Box::pin(tokio::time::sleep(limits.idle_timeout)),
+            first_byte: Some(Box::pin(tokio::time::sleep(limits.header_timeout))),
             _permit: permit,
+            _slot: slot,
         })
     }
 
@@ -220,7 +279,11 @@ impl Guarded {
     }
 
     fn expired(&mut self, cx: &mut Context<'_>) -> bool {
-        self.deadline.as_mut().poll(cx).is_ready()
+        let silent = self
+            .first_byte
+            .as_mut()
+            .is_some_and(|first| first.as_mut().poll(cx).is_ready());
+        silent || self.deadline.as_mut().poll(cx).is_ready()
     }
 }
 
@@ -246,6 +309,7 @@ impl AsyncRead for Guarded {
         match Pin::new(&mut self.stream).poll_read(cx, buf) {
             Poll::Ready(result) => {
                 if buf.filled().len() > before {
+                    self.first_byte = None;
                     self.active();
                 }
                 Poll::Ready(result)
