@@ -14,6 +14,7 @@ pub mod imitation;
 pub mod jobs;
 pub mod names;
 pub mod record;
+pub mod tensorboard;
 pub mod validate;
 pub mod worlds;
 

@@ -42,6 +42,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/jobs/{id}/cancel", post(jobs::cancel))
         .route("/jobs/{id}/rerun", post(jobs::rerun))
         .route("/jobs/{id}/recording", get(resources::recording))
+        .route("/jobs/{id}/tensorboard", get(resources::tensorboard))
         .route("/sweeps", get(sweeps::list).post(sweeps::create))
         .route("/sweeps/{id}", get(sweeps::get))
         .route("/sweeps/{id}/cancel", post(sweeps::cancel))

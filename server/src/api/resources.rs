@@ -178,6 +178,37 @@ pub async fn run_metrics(State(state): State<Arc<AppState>>, Path(id): Path<Stri
     Ok(Json(json!({ "run_id": job.id, "metrics": metrics })).into_response())
 }
 
+/// `GET /api/v1/jobs/{id}/tensorboard`: a training job's series as a TensorBoard event file
+/// (every iteration's scalars by environment step, the job's settings as text), made from the
+/// stored metrics; for `tensorboard --logdir`.
+pub async fn tensorboard(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Res {
+    let job = job_of_kind(&state, &id, "train").await?;
+    let metrics = state
+        .store
+        .metrics(job.id)
+        .await
+        .map_err(|e| ApiError::store("run", e))?;
+    let iterations: Vec<crm_api::Iteration> = metrics
+        .iter()
+        .filter_map(|m| serde_json::from_str(&m.data).ok())
+        .collect();
+    let settings: serde_json::Value = serde_json::from_str(&job.spec).unwrap_or_default();
+    let start = job.started_at.unwrap_or(job.created_at) as f64 / 1000.0;
+    let bytes = crm_api::tensorboard::file(&settings, &iterations, start);
+    let name = crm_api::tensorboard::file_name(start, &format!("crm-job{}", job.id));
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/octet-stream".to_string()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"{name}\""),
+            ),
+        ],
+        bytes,
+    )
+        .into_response())
+}
+
 pub async fn evaluations(
     State(state): State<Arc<AppState>>,
     Query(query): Query<HashMap<String, String>>,

@@ -179,6 +179,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         .truncate(args.resume.is_none())
         .open(&metrics_path)
         .with_context(|| format!("creating {}", metrics_path.display()))?;
+    let mut events = tensorboard_events(&args.out, &metrics_path, &spec)?;
     let checkpoint = args
         .out
         .join(format!("{}.safetensors", spec.algorithm.name()));
@@ -204,6 +205,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         let it = trainer.iterate()?;
         writeln!(metrics, "{}", serde_json::to_string(&it)?)?;
+        events.iteration(&it)?;
         let mix: Vec<String> = it
             .stage_mix
             .iter()
@@ -261,6 +263,37 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         metrics_path.display()
     );
     Ok(())
+}
+
+/// The run's TensorBoard event file, `OUT/events.out.tfevents.crm-train`, written anew from
+/// the metrics log so far (a resumed run's earlier iterations included), for the run's
+/// iterations to be appended as they come (`crm_api::tensorboard`).
+fn tensorboard_events(
+    out: &std::path::Path,
+    metrics: &std::path::Path,
+    spec: &TrainSpec,
+) -> anyhow::Result<crm_api::tensorboard::Writer<std::io::BufWriter<std::fs::File>>> {
+    let earlier: Vec<crm_api::Iteration> = std::fs::read_to_string(metrics)
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|line| serde_json::from_str(line).ok())
+        .collect();
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64());
+    let path = out.join("events.out.tfevents.crm-train");
+    let file =
+        std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?;
+    let mut writer = crm_api::tensorboard::Writer::new(
+        std::io::BufWriter::new(file),
+        &serde_json::to_value(spec)?,
+        now,
+    )
+    .with_context(|| format!("writing {}", path.display()))?;
+    for it in &earlier {
+        writer.iteration(it)?;
+    }
+    Ok(writer)
 }
 
 /// Drops the lines of a metrics log past `steps` (what a killed run wrote after its last

@@ -1,0 +1,35 @@
+#!/usr/bin/env python3
+"""What TensorBoard's own reader finds in a folder of event files, for the tests
+(worker/tests/tensorboard.rs): `tensorboard-scalars.py DIR` prints one JSON object,
+{"scalars": {TAG: [[STEP, VALUE], ...]}, "texts": {TAG: TEXT}}, read with the `tensorboard`
+package's EventAccumulator (every event kept).
+"""
+
+import json
+import sys
+
+from tensorboard.backend.event_processing import event_accumulator
+
+
+def main(folder):
+    accumulator = event_accumulator.EventAccumulator(
+        folder,
+        size_guidance={event_accumulator.SCALARS: 0, event_accumulator.TENSORS: 0},
+    )
+    accumulator.Reload()
+    tags = accumulator.Tags()
+    scalars = {
+        tag: [[event.step, event.value] for event in accumulator.Scalars(tag)]
+        for tag in tags["scalars"]
+    }
+    texts = {}
+    for tag in tags["tensors"]:
+        for event in accumulator.Tensors(tag):
+            texts[tag] = event.tensor_proto.string_val[0].decode()
+    print(json.dumps({"scalars": scalars, "texts": texts}))
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit("usage: tensorboard-scalars.py DIR")
+    main(sys.argv[1])
