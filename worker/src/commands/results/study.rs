@@ -224,7 +224,9 @@ pub fn run(
     study: &StudyFile,
     mut landed: impl FnMut(&str, u64) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
-    let mut submitted = false;
+    // The runs this invocation submitted: one missing again was cancelled or lost, and is
+    // reported, not submitted twice.
+    let mut submitted = std::collections::BTreeSet::new();
     let mut failures = BTreeMap::new();
     loop {
         let on_disk = record::Study::read(dir)?;
@@ -238,6 +240,11 @@ pub fn run(
                 }
                 let run_dir = record::run_dir(dir, algorithm, seed);
                 match train_job(&jobs, algorithm, seed) {
+                    None if submitted.contains(&(algorithm, seed)) => {
+                        let why = "its training job was cancelled or failed on the coordinator";
+                        eprintln!("{algorithm} seed {seed}: {why}");
+                        failures.insert((algorithm, seed), why.to_string());
+                    }
                     None => missing.entry(seed).or_default().push(algorithm.clone()),
                     Some(train) => match progress(rest, study, &run_dir, &jobs, train)? {
                         Progress::Waiting => open += 1,
@@ -255,9 +262,6 @@ pub fn run(
             }
         }
         if !missing.is_empty() {
-            if submitted {
-                bail!("the coordinator lost the study's jobs it was given: {missing:?}");
-            }
             for (seed, algorithms) in &missing {
                 let created =
                     rest.post_json("/api/v1/sweeps", &sweep_request(study, *seed, algorithms))?;
@@ -266,11 +270,17 @@ pub fn run(
                     created["sweep"]["id"],
                     algorithms.join(", ")
                 );
+                for algorithm in algorithms {
+                    let name = study
+                        .algorithms
+                        .iter()
+                        .find(|a| *a == algorithm)
+                        .context("an algorithm of the study")?;
+                    submitted.insert((name, *seed));
+                }
             }
-            submitted = true;
             continue;
         }
-        submitted = true;
         if open == 0 {
             break;
         }
