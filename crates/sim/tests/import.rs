@@ -64,9 +64,20 @@ fn the_import_loads_points_at_the_copy_and_does_not_depend_on_where_it_lies() {
     let options = Options {
         name: "dexmobile-real".into(),
         without: vec!["o_force".into(), "o_torque".into(), "o_cone".into()],
+        ..Options::default()
     };
     let real = import(&copy, &out("real"), &options).expect("imports");
     assert_ne!(real.hash, imported.hash);
+    // So does the authors' approach geometry, which the world then runs.
+    let options = Options {
+        name: "dexmobile-authors".into(),
+        approach: Some(grasp_sim::Approach::Authors),
+        ..Options::default()
+    };
+    let authors = import(&copy, &out("authors"), &options).expect("imports");
+    assert_ne!(authors.hash, imported.hash);
+    let world = grasp_sim::World::load(&authors.dir).expect("loads");
+    assert_eq!(world.approach, grasp_sim::Approach::Authors);
 }
 
 #[test]

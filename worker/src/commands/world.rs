@@ -63,6 +63,10 @@ pub struct ImportArgs {
     /// separate with commas. The paper's real SVH: `--without o_force,o_torque,o_cone`.
     #[arg(long, value_delimiter = ',')]
     pub without: Vec<String>,
+    /// The approach geometry: `authors` (their arm's slowed, clamped steps: the paper's
+    /// setting, docs/WORLDS.md) or `free` (the default). A world of its own hash.
+    #[arg(long, value_parser = ["free", "authors"])]
+    pub approach: Option<String>,
 }
 
 pub fn run(command: WorldCommand) -> anyhow::Result<()> {
@@ -75,6 +79,11 @@ pub fn run(command: WorldCommand) -> anyhow::Result<()> {
             let options = grasp_sim::import::dexmobile::Options {
                 name: args.name,
                 without: args.without,
+                approach: match args.approach.as_deref() {
+                    Some("authors") => Some(grasp_sim::Approach::Authors),
+                    Some(_) => Some(grasp_sim::Approach::Free),
+                    None => None,
+                },
             };
             let imported = grasp_sim::import::dexmobile::import(&args.path, &args.out, &options)?;
             let line = serde_json::json!({

@@ -43,6 +43,9 @@ pub struct Options {
     pub name: String,
     /// Sensors the robot lacks (`world.json` `sensors.without`).
     pub without: Vec<String>,
+    /// The approach geometry (`world.json` `approach`; free when absent): the authors' arm
+    /// is [`crate::config::Approach::Authors`].
+    pub approach: Option<crate::config::Approach>,
 }
 
 impl Default for Options {
@@ -50,6 +53,7 @@ impl Default for Options {
         Self {
             name: "dexmobile".into(),
             without: Vec::new(),
+            approach: None,
         }
     }
 }
@@ -477,6 +481,9 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
         });
         if !options.without.is_empty() {
             world["sensors"] = json!({ "without": options.without });
+        }
+        if let Some(approach) = options.approach {
+            world["approach"] = json!(approach);
         }
         write_json(&staging.join("world.json"), &world)?;
         write_json(&staging.join("hand.json"), &profile)?;
