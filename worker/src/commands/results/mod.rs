@@ -10,6 +10,7 @@
 //! `--coordinator URL` the study runs on that coordinator's workers; without, a coordinator
 //! and local workers start in this process on `--data-dir`, as `crm up` does.
 
+mod paper;
 mod plot;
 pub mod record;
 mod report;
