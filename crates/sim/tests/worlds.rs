@@ -512,6 +512,83 @@ fn a_world_drafted_from_the_test_hands_description_loads_with_its_profiles_choic
     std::fs::remove_dir_all(root).ok();
 }
 
+/// A finger whose description makes its first joint the leader (the Ability Hand's
+/// `index_q2 = 1.0585 index_q1 + 0.7235`): the draft commands the leader over its own limits,
+/// couples the followers with the description's multiplier and offset, holds none of them and
+/// says so.
+#[test]
+fn a_drafted_finger_follows_the_couplings_its_description_declares() {
+    use grasp_sim::init::init_world;
+    let root = test_world("init-leader");
+    let urdf = root.join("assets/my_hand/urdf/hand.urdf");
+    let text = std::fs::read_to_string(&urdf).expect("read");
+    let limit = "<limit lower=\"-0.2\" upper=\"2.0\" effort=\"1\" velocity=\"5\"/>";
+    let edits = [
+        // index_mcp leads: its mimic goes.
+        (
+            format!("{limit}\n    <mimic joint=\"index_pip\" multiplier=\"0.67\" offset=\"0\"/>"),
+            limit.replace("upper=\"2.0\"", "upper=\"1.2\""),
+        ),
+        // index_dip follows it too.
+        (
+            "<mimic joint=\"index_pip\" multiplier=\"0.77\" offset=\"0\"/>".to_string(),
+            "<mimic joint=\"index_mcp\" multiplier=\"0.8\" offset=\"0\"/>".to_string(),
+        ),
+    ];
+    let mut edited = text.clone();
+    for (from, to) in &edits {
+        assert_eq!(edited.matches(from.as_str()).count(), 1, "{from}");
+        edited = edited.replacen(from.as_str(), to, 1);
+    }
+    // index_pip follows it with an offset.
+    let pip = edited.find("<joint name=\"index_pip\"").expect("index_pip");
+    let end = pip + edited[pip..].find("  </joint>").expect("its end");
+    edited.insert_str(
+        end,
+        "    <mimic joint=\"index_mcp\" multiplier=\"1.0585\" offset=\"0.3\"/>\n",
+    );
+    std::fs::write(&urdf, edited).expect("write");
+    let out = root.join("drafted");
+    let drafted = init_world(&urdf, &out, None, None, &assets(&root)).expect("a draft");
+    let profile: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("hand.json")).expect("hand.json"))
+            .expect("JSON");
+    let index = &profile["fingers"]["index"];
+    assert_eq!(index["command"], "index_mcp");
+    assert_eq!(index["range"], serde_json::json!([0.0, 1.2]));
+    let joints = index["joints"].as_array().expect("joints");
+    for follower in ["index_pip", "index_dip"] {
+        let joint = joints
+            .iter()
+            .find(|j| j["joint"] == follower)
+            .unwrap_or_else(|| panic!("{follower} coupled: {joints:?}"));
+        assert_eq!(joint["ratio"], "description", "{follower}");
+    }
+    assert!(
+        profile["held"].get("index_pip").is_none() && profile["held"].get("index_dip").is_none(),
+        "{}",
+        profile["held"]
+    );
+    assert!(
+        drafted
+            .notes
+            .iter()
+            .any(|n| n.contains("\"index_pip\" follows \"index_mcp\"")
+                && n.contains("1.0585 x + 0.3")),
+        "{:?}",
+        drafted.notes
+    );
+    // The loaded hand couples the follower as the description says.
+    let coupled = &drafted.world.benchmark.hand.fingers[1].coupled;
+    assert!(
+        coupled
+            .iter()
+            .any(|&(_, ratio, offset)| (ratio - 1.0585).abs() < 1e-6 && (offset - 0.3).abs() < 1e-6),
+        "{coupled:?}"
+    );
+    std::fs::remove_dir_all(root).ok();
+}
+
 /// The world's hash covers the hand's files by content: a changed mesh changes it (the
 /// profile hash, what older checkpoints recorded, stays), a copy of the same files in another
 /// place does not.

@@ -11,8 +11,10 @@
 //! from the others; the other fingers, along their row from the end nearer the thumb, are
 //! index, middle, ring and little (a hand with three leaves `little` out). A finger's second flexion
 //! joint is its command (the paper's PIP), the first follows at the paper's `mcp`, the third at
-//! `dip`; the thumb's first is its command (TMCP), its last follows at `ip`. A coupling the
-//! description declares wins.
+//! `dip`; the thumb's first is its command (TMCP), its last follows at `ip`. The description's
+//! couplings come first: the joint a chain's other joints follow (URDF `<mimic>`, MJCF joint
+//! equalities) is its command, whatever its place, its range its own limits, and each joint
+//! that follows it keeps the description's multiplier and offset and is never held.
 
 use std::collections::BTreeMap;
 
@@ -218,19 +220,54 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
             .iter()
             .partition(|&&j| axis_of(j).dot(last).abs() > 0.7);
         held_spreads.extend(spread.iter().map(|&j| description.joints[j].name.clone()));
-        let command = if is_thumb || flex.len() < 2 {
-            flex[0]
-        } else {
-            flex[1]
+        // The joint the description makes the chain's others follow leads it: it is the
+        // command. Else the paper's: the thumb's first flexion joint, a finger's second.
+        let followers = |leader: usize| {
+            chain
+                .joints
+                .iter()
+                .filter(|&&j| {
+                    description.joints[j]
+                        .mimic
+                        .as_ref()
+                        .is_some_and(|m| m.leader == description.joints[leader].name)
+                })
+                .count()
+        };
+        let leader = flex
+            .iter()
+            .copied()
+            .filter(|&l| followers(l) > 0)
+            .max_by_key(|&l| followers(l));
+        let command = match leader {
+            Some(leader) => leader,
+            None if is_thumb || flex.len() < 2 => flex[0],
+            None => flex[1],
         };
         let command_name = description.joints[command].name.clone();
         let mut joints = Vec::new();
-        for (k, &j) in flex.iter().enumerate() {
+        for &j in &chain.joints {
             let joint = &description.joints[j];
-            let declared = joint
-                .mimic
-                .as_ref()
-                .is_some_and(|m| m.leader == command_name);
+            // A joint that follows the command in the description follows it so, whatever
+            // its place: never held, its multiplier and offset the description's.
+            if let Some(m) = joint.mimic.as_ref().filter(|m| m.leader == command_name) {
+                notes.push(format!(
+                    "{name}: {:?} follows {command_name:?} as the description couples it: {} x + {}",
+                    joint.name, m.ratio, m.offset
+                ));
+                held_spreads.retain(|h| *h != joint.name);
+                joints.push(Coupled {
+                    joint: joint.name.clone(),
+                    ratio: Some(Ratio::Named("description".into())),
+                    offset: None,
+                    torque: None,
+                });
+                continue;
+            }
+            // A spread joint (not a flexion) is held (`held_spreads` above).
+            let Some(k) = flex.iter().position(|&f| f == j) else {
+                continue;
+            };
             let paper = match (is_thumb, k) {
                 _ if j == command => None,
                 (true, k) if k + 1 == flex.len() => Some("ip"),
@@ -241,11 +278,7 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
                     continue;
                 }
             };
-            let ratio = if declared {
-                Some(Ratio::Named("description".into()))
-            } else {
-                paper.map(|p| Ratio::Named(p.into()))
-            };
+            let ratio = paper.map(|p| Ratio::Named(p.into()));
             joints.push(Coupled {
                 joint: joint.name.clone(),
                 ratio,
