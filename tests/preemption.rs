@@ -20,13 +20,7 @@ fn metrics(addr: &str, id: i64) -> Vec<Value> {
         .as_array()
         .expect("metrics")
         .iter()
-        .map(|m| {
-            let mut data = m["data"].clone();
-            let map = data.as_object_mut().expect("an iteration");
-            map.remove("wall_s");
-            map.remove("steps_per_s");
-            data
-        })
+        .map(|m| without_wall_clock(&m["data"]))
         .collect()
 }
 

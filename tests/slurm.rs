@@ -9,7 +9,6 @@ mod support;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use support::*;
@@ -86,13 +85,7 @@ impl Api {
             .as_array()
             .expect("metrics")
             .iter()
-            .map(|m| {
-                let mut data = m["data"].clone();
-                let map = data.as_object_mut().expect("an iteration");
-                map.remove("wall_s");
-                map.remove("steps_per_s");
-                data
-            })
+            .map(|m| without_wall_clock(&m["data"]))
             .collect()
     }
 }
@@ -109,20 +102,6 @@ fn slurm(conf: &Path, tool: &str, args: &[&str]) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn until<T>(secs: u64, what: &str, mut f: impl FnMut() -> Option<T>) -> T {
-    let started = Instant::now();
-    loop {
-        if let Some(value) = f() {
-            return value;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(secs),
-            "timed out waiting for {what}"
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
 }
 
 #[test]
@@ -183,7 +162,7 @@ fn a_sweep_runs_on_slurm_workers_that_survive_scancel_and_leave_by_themselves() 
     eprintln!("sweep of {} runs submitted: jobs {ids:?}", ids.len());
 
     // A job two iterations in, on a worker Slurm runs: scancel that worker.
-    let (victim, batch) = until(300, "a running job on a Slurm worker", || {
+    let (victim, batch) = wait_for(300, "a running job on a Slurm worker", || {
         let jobs = api.get("/api/v1/jobs?kind=train&state=running");
         let job = jobs["jobs"]
             .as_array()?
@@ -207,12 +186,12 @@ fn a_sweep_runs_on_slurm_workers_that_survive_scancel_and_leave_by_themselves() 
     );
     slurm(&conf, "scancel", &[&batch]);
     eprintln!("scancel {batch}: its worker held job {victim}");
-    until(40, "the job given back", || {
+    wait_for(40, "the job given back", || {
         (api.job(victim)["state"] == "queued" || api.job(victim)["attempts"] == 2).then_some(())
     });
 
     for id in &ids {
-        until(600, "every run to succeed", || {
+        wait_for(600, "every run to succeed", || {
             let job = api.job(*id);
             assert!(
                 !["failed", "cancelled"].contains(&job["state"].as_str().unwrap_or("")),
@@ -238,7 +217,7 @@ fn a_sweep_runs_on_slurm_workers_that_survive_scancel_and_leave_by_themselves() 
     spec["algorithm"] = json!("crm-ppo");
     spec["seed"] = resumed["spec"]["seed"].clone();
     let reference = api.post("/api/v1/jobs", &spec)["id"].as_i64().expect("id");
-    until(300, "the uninterrupted run", || {
+    wait_for(300, "the uninterrupted run", || {
         (api.job(reference)["state"] == "succeeded").then_some(())
     });
     let (a, b) = (api.metrics(victim), api.metrics(reference));
@@ -252,7 +231,7 @@ fn a_sweep_runs_on_slurm_workers_that_survive_scancel_and_leave_by_themselves() 
     );
 
     // Idle workers leave; the queue ends empty.
-    until(90, "the Slurm queue to empty", || {
+    wait_for(90, "the Slurm queue to empty", || {
         slurm(&conf, "squeue", &["--noheader", "--format=%i"])
             .trim()
             .is_empty()
@@ -299,7 +278,7 @@ fn a_sweep_runs_on_slurm_workers_that_survive_scancel_and_leave_by_themselves() 
         String::from_utf8_lossy(&out.stderr)
     );
     let array = String::from_utf8_lossy(&out.stdout).trim().to_string();
-    until(90, "the array's workers to register and leave", || {
+    wait_for(90, "the array's workers to register and leave", || {
         let workers = api.get("/api/v1/workers");
         let named = workers["workers"]
             .as_array()?

@@ -279,8 +279,9 @@ fn short_hash(bytes: &[u8]) -> String {
         .collect()
 }
 
-/// `word` as a POSIX shell reads it back.
-fn shell_quote(word: &str) -> String {
+/// `word` as a POSIX shell reads it back: as it is when it holds only safe characters, else
+/// in single quotes.
+pub fn shell_quote(word: &str) -> String {
     let safe = |c: char| c.is_ascii_alphanumeric() || "-_./=:,@+".contains(c);
     if !word.is_empty() && word.chars().all(safe) {
         word.to_string()

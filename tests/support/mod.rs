@@ -293,6 +293,17 @@ pub fn wait_for<T>(secs: u64, what: &str, mut f: impl FnMut() -> Option<T>) -> T
     }
 }
 
+/// An iteration's metrics without the fields that depend on the wall clock (`wall_s`,
+/// `steps_per_s`): what two runs of the same seed share.
+pub fn without_wall_clock(iteration: &Value) -> Value {
+    let mut data = iteration.clone();
+    if let Some(map) = data.as_object_mut() {
+        map.remove("wall_s");
+        map.remove("steps_per_s");
+    }
+    data
+}
+
 /// Waits until job `id` reaches `state`; fails early on another final state.
 pub fn wait_state(addr: &str, id: i64, state: &str, secs: u64) -> Value {
     wait_for(secs, &format!("job {id} to be {state}"), || {

@@ -240,7 +240,7 @@ fn study(args: &ResultsArgs, rest: &Rest, ppo: PpoConfig, sac: SacConfig) -> any
         name: name.clone(),
         command: std::env::args()
             .skip(1)
-            .map(|a| shell_word(&a))
+            .map(|a| crm_server::launcher::shell_quote(&a))
             .collect::<Vec<_>>()
             .join(" "),
         world,
@@ -272,17 +272,6 @@ fn study(args: &ResultsArgs, rest: &Rest, ppo: PpoConfig, sac: SacConfig) -> any
     );
     study::run(rest, &dir, &file, |_, _| write_report(&args.out, args.reps))?;
     write_report(&args.out, args.reps)
-}
-
-/// `word` as a POSIX shell reads it back: as it is when it holds only safe characters, else
-/// in single quotes.
-fn shell_word(word: &str) -> String {
-    let safe = |c: char| c.is_ascii_alphanumeric() || "-_./=:,@+".contains(c);
-    if !word.is_empty() && word.chars().all(safe) {
-        word.to_string()
-    } else {
-        format!("'{}'", word.replace('\'', "'\\''"))
-    }
 }
 
 /// The study `asked` continuing `before` (the same settings; its seeds and algorithms joined
