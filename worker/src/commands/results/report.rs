@@ -449,6 +449,19 @@ fn reading(text: &mut String, study: &Study, algorithms: &[&str], iqms: &[(Strin
             overlaps.join("; ")
         }
     );
+    let single: Vec<&str> = algorithms
+        .iter()
+        .copied()
+        .filter(|a| study.runs_of(a).count() < 2)
+        .collect();
+    if !single.is_empty() {
+        let _ = writeln!(
+            text,
+            "- One run so far for {}: a bootstrap over one run has no spread, so those \
+             intervals are points and say nothing yet about seed-to-seed variation.",
+            single.join(", ")
+        );
+    }
     let ours: Vec<&str> = order
         .iter()
         .map(|(a, _)| a.as_str())
