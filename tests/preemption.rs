@@ -125,11 +125,6 @@ fn a_preempted_workers_job_is_given_back_and_resumed_as_the_same_run() {
     let mut idle = start_worker(&grpc, &["--idle-exit-s", "1", "--name", "idle"]);
     assert!(exit_within(&mut idle, 20).success());
     let workers = get(&addr, "/api/v1/workers");
-    let names: Vec<&str> = workers["workers"]
-        .as_array()
-        .expect("workers")
-        .iter()
-        .filter_map(|w| w["name"].as_str())
-        .collect();
+    let names = worker_names(&workers);
     assert_eq!(names, ["first", "slurm-4242", "idle"]);
 }

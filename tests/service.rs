@@ -416,12 +416,7 @@ fn a_killed_workers_job_is_requeued_and_resumed_from_its_checkpoint() {
     );
     assert_eq!(done["result"]["steps"], 40960);
     let workers = get(&addr, "/api/v1/workers");
-    let names: Vec<&str> = workers["workers"]
-        .as_array()
-        .expect("workers")
-        .iter()
-        .filter_map(|w| w["name"].as_str())
-        .collect();
+    let names = worker_names(&workers);
     assert_eq!(names, ["first", "second"]);
 }
 

@@ -238,12 +238,7 @@ fn a_sweep_runs_on_slurm_workers_that_survive_scancel_and_leave_by_themselves() 
             .then_some(())
     });
     let workers = api.get("/api/v1/workers");
-    let names: Vec<&str> = workers["workers"]
-        .as_array()
-        .expect("workers")
-        .iter()
-        .filter_map(|w| w["name"].as_str())
-        .collect();
+    let names = worker_names(&workers);
     assert!(
         names.len() >= 3 && names.iter().all(|n| n.starts_with("slurm-")),
         "{names:?}"

@@ -293,6 +293,16 @@ pub fn wait_for<T>(secs: u64, what: &str, mut f: impl FnMut() -> Option<T>) -> T
     }
 }
 
+/// The workers' names in a `GET /api/v1/workers` answer, in registration order.
+pub fn worker_names(workers: &Value) -> Vec<&str> {
+    workers["workers"]
+        .as_array()
+        .expect("workers")
+        .iter()
+        .filter_map(|w| w["name"].as_str())
+        .collect()
+}
+
 /// An iteration's metrics without the fields that depend on the wall clock (`wall_s`,
 /// `steps_per_s`): what two runs of the same seed share.
 pub fn without_wall_clock(iteration: &Value) -> Value {

@@ -12,6 +12,17 @@ fn crm() -> Command {
     Command::new(env!("CARGO_BIN_EXE_crm"))
 }
 
+/// Runs `command` and fails the test, with its stderr, unless it exits 0.
+fn succeeded(command: &mut Command, what: &str) -> std::process::Output {
+    let out = command.output().unwrap_or_else(|e| panic!("{what}: {e}"));
+    assert!(
+        out.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 fn temp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("crm-results-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -63,27 +74,12 @@ fn interval_estimates_agree_with_rliable() {
     };
     let dir = temp("rliable");
     let scores = score_file(&dir, 1000);
-    let ours = crm()
-        .args(["results", "--stats-of"])
-        .arg(&scores)
-        .output()
-        .expect("crm runs");
-    assert!(
-        ours.status.success(),
-        "{}",
-        String::from_utf8_lossy(&ours.stderr)
+    let ours = succeeded(
+        crm().args(["results", "--stats-of"]).arg(&scores),
+        "crm runs",
     );
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/rliable-figures.py");
-    let theirs = Command::new(python)
-        .arg(script)
-        .arg(&scores)
-        .output()
-        .expect("python runs");
-    assert!(
-        theirs.status.success(),
-        "{}",
-        String::from_utf8_lossy(&theirs.stderr)
-    );
+    let theirs = succeeded(Command::new(python).arg(script).arg(&scores), "python runs");
     let ours: Value = serde_json::from_slice(&ours.stdout).expect("our JSON");
     let theirs: Value = serde_json::from_slice(&theirs.stdout).expect("rliable's JSON");
     let check = |what: String, a: &Value, b: &Value| {
@@ -241,26 +237,10 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
         "killed before any run landed"
     );
     // The same command continues it: the interrupted job is leased again and finishes.
-    let again = crm()
-        .args(study_args(&out, &data, "1"))
-        .output()
-        .expect("crm results");
-    assert!(
-        again.status.success(),
-        "{}",
-        String::from_utf8_lossy(&again.stderr)
-    );
+    succeeded(crm().args(study_args(&out, &data, "1")), "crm results");
     // Once finished, the same command trains nothing and changes no run.
     let kept = std::fs::read(study.join("crm-ppo/seed-0/checkpoint.safetensors")).expect("kept");
-    let done = crm()
-        .args(study_args(&out, &data, "1"))
-        .output()
-        .expect("crm results");
-    assert!(
-        done.status.success(),
-        "{}",
-        String::from_utf8_lossy(&done.stderr)
-    );
+    let done = succeeded(crm().args(study_args(&out, &data, "1")), "crm results");
     assert!(!String::from_utf8_lossy(&done.stderr).contains("sweep "));
     assert_eq!(
         std::fs::read(study.join("crm-ppo/seed-0/checkpoint.safetensors")).expect("read"),
@@ -281,15 +261,7 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
     .expect("json");
     assert_eq!(deterministic["deterministic"], true);
     // Extended by a seed: only the new seed's runs train.
-    let extended = crm()
-        .args(study_args(&out, &data, "2"))
-        .output()
-        .expect("crm results");
-    assert!(
-        extended.status.success(),
-        "{}",
-        String::from_utf8_lossy(&extended.stderr)
-    );
+    let extended = succeeded(crm().args(study_args(&out, &data, "2")), "crm results");
     let stderr = String::from_utf8_lossy(&extended.stderr);
     assert!(stderr.contains("seed 1, crm-ppo, ppo"), "{stderr}");
     assert!(!stderr.contains("seed 0,"), "{stderr}");
@@ -320,15 +292,11 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
     for plot in ["success.png", "episode_length.png", "profile.png"] {
         std::fs::remove_file(study.join(plot)).expect(plot);
     }
-    let rebuilt = crm()
-        .args(["results", "--report-only", "--reps", "300", "--out"])
-        .arg(&out)
-        .output()
-        .expect("crm results --report-only");
-    assert!(
-        rebuilt.status.success(),
-        "{}",
-        String::from_utf8_lossy(&rebuilt.stderr)
+    succeeded(
+        crm()
+            .args(["results", "--report-only", "--reps", "300", "--out"])
+            .arg(&out),
+        "crm results --report-only",
     );
     assert!(files(&out) == before, "the rebuilt report differs");
     std::fs::remove_dir_all(&dir).ok();
@@ -352,15 +320,9 @@ fn the_committed_report_rebuilds_byte_for_byte_from_the_committed_runs() {
     let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs");
     let out = temp("committed");
     copy_tree(&docs.join("results"), &out.join("results"));
-    let rebuilt = crm()
-        .args(["results", "--report-only", "--out"])
-        .arg(&out)
-        .output()
-        .expect("crm results --report-only");
-    assert!(
-        rebuilt.status.success(),
-        "{}",
-        String::from_utf8_lossy(&rebuilt.stderr)
+    succeeded(
+        crm().args(["results", "--report-only", "--out"]).arg(&out),
+        "crm results --report-only",
     );
     let ours = std::fs::read_to_string(out.join("RESULTS.md")).expect("rebuilt");
     let committed = std::fs::read_to_string(docs.join("RESULTS.md")).expect("committed");

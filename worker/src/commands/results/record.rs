@@ -251,6 +251,18 @@ pub fn read_curve(path: &Path) -> anyhow::Result<Vec<CurvePoint>> {
         .collect()
 }
 
+impl StudyFile {
+    /// The objectives of the study's tasks, sorted.
+    pub fn objectives(&self) -> Vec<String> {
+        self.task_objectives
+            .values()
+            .cloned()
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect()
+    }
+}
+
 impl Study {
     /// Reads a study folder and every finished run in it.
     pub fn read(dir: &Path) -> anyhow::Result<Self> {

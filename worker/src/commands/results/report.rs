@@ -157,14 +157,7 @@ type Cell = ((f64, f64), (f64, f64));
 
 /// Table I as the paper prints it: mean ± std over seeds per objective, beside the paper.
 fn table_one(text: &mut String, study: &Study, algorithms: &[&str]) {
-    let mut objectives: Vec<String> = study
-        .file
-        .task_objectives
-        .values()
-        .cloned()
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect();
+    let mut objectives = study.file.objectives();
     objectives.push("overall".into());
     text.push_str(
         "\n### Table I\n\nSuccess rate and mean episode length (control steps) of the sampled \
@@ -264,14 +257,7 @@ fn intervals(
             );
         }
     }
-    let objectives: Vec<String> = study
-        .file
-        .task_objectives
-        .values()
-        .cloned()
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect();
+    let objectives = study.file.objectives();
     text.push_str("\nIQM of the sampled evaluation per objective, over runs x that objective's tasks:\n\n| objective |");
     for (a, _, _) in matrices {
         let _ = write!(text, " {a} |");
