@@ -128,3 +128,39 @@ fn a_preempted_workers_job_is_given_back_and_resumed_as_the_same_run() {
     let names = worker_names(&workers);
     assert_eq!(names, ["first", "slurm-4242", "idle"]);
 }
+
+/// CRM-SAC's whole state (its replay buffer) can outgrow the coordinator's checkpoint limit:
+/// the worker then uploads the policy alone and the run goes on, rather than failing.
+#[test]
+fn a_checkpoint_over_the_coordinators_limit_goes_up_as_the_policy_alone() {
+    const SAC: &str = r#"{"kind": "train", "algorithm": "crm-sac", "task": "mouse-press", "steps": 6144, "seed": 2, "envs": 2, "sac": {"rollout_steps": 384, "learning_starts": 500, "buffer_size": 100000, "batch_size": 64, "hidden": [64, 64], "early_stop_window": 1000000}}"#;
+    let data = TempDir::new("preempt-limit");
+    // The policy of [64, 64] networks is about 150 kB; with its state the checkpoint passes
+    // 400 kB after the first iterations.
+    let server = start_server(&data.0, &["--max-checkpoint-bytes", "400000"]);
+    let addr = server.http.clone();
+    let grpc = format!("http://{}", server.grpc);
+    let _worker = start_worker(&grpc, &["--checkpoint-every-s", "1", "--name", "w"]);
+    let id = submit(&addr, SAC)["id"].as_i64().expect("id");
+    let done = wait_state(&addr, id, "succeeded", 300);
+    assert_eq!(done["attempts"], 1, "{done}");
+    let saved = get(&addr, &format!("/api/v1/checkpoints?job_id={id}"));
+    let saved = saved["checkpoints"].as_array().expect("checkpoints");
+    let mid_run = saved
+        .iter()
+        .find(|c| c["steps"].as_i64().is_some_and(|s| s > 0 && s < 6144))
+        .unwrap_or_else(|| panic!("a checkpoint uploaded mid-run: {saved:?}"));
+    let file = http(
+        &addr,
+        "GET",
+        &format!("/api/v1/checkpoints/{}/download", mid_run["id"]),
+        None,
+        None,
+    );
+    assert!(file.body.len() <= 400_000, "{}", file.body.len());
+    let (_, metadata) = safetensors::SafeTensors::read_metadata(&file.body).expect("safetensors");
+    let header = &metadata.metadata().as_ref().expect("metadata")["crm_grasp"];
+    let header: Value = serde_json::from_str(header).expect("header");
+    assert_eq!(header["steps"], mid_run["steps"]);
+    assert!(header.get("state").is_none(), "the policy alone: {header}");
+}

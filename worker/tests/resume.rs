@@ -1,7 +1,7 @@
-//! A resumed run is the same run: `crm train` killed with SIGKILL after a checkpoint, or
-//! stopped by SIGTERM (it checkpoints at the iteration's end and exits 0), and resumed from
-//! its checkpoint writes the same metrics, line for line (wall-clock aside), and the same final
-//! tensors, bit for bit, as the same run never interrupted.
+//! A resumed run is the same run, for every learner: `crm train` killed with SIGKILL after a
+//! checkpoint, or stopped by SIGTERM (it checkpoints at the iteration's end and exits 0), and
+//! resumed from its checkpoint writes the same metrics, line for line (wall-clock aside), and
+//! the same final tensors, bit for bit, as the same run never interrupted.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -77,10 +77,13 @@ enum Stop {
     Term,
 }
 
-fn check_resume_is_the_same_run(algorithm: &str, stop: Stop) {
+/// Small PPO iterations, so that the run checkpoints many times.
+const PPO: &str = r#"{"rollout_steps": 384, "minibatch_size": 128}"#;
+
+fn check_resume_is_the_same_run(algorithm: &str, config_json: &str, stop: Stop) {
     let dir = temp(&format!("{algorithm}-{}", stop == Stop::Term));
-    let config = dir.join("ppo.json");
-    std::fs::write(&config, r#"{"rollout_steps": 384, "minibatch_size": 128}"#).expect("config");
+    let config = dir.join("config.json");
+    std::fs::write(&config, config_json).expect("config");
     let whole = dir.join("whole");
     let out = train(&whole, &config, algorithm, false)
         .output()
@@ -174,15 +177,24 @@ fn check_resume_is_the_same_run(algorithm: &str, stop: Stop) {
 
 #[test]
 fn a_crm_ppo_run_killed_and_resumed_is_the_same_run() {
-    check_resume_is_the_same_run("crm-ppo", Stop::Kill);
+    check_resume_is_the_same_run("crm-ppo", PPO, Stop::Kill);
 }
 
 #[test]
 fn an_lppo_run_killed_and_resumed_is_the_same_run() {
-    check_resume_is_the_same_run("lppo", Stop::Kill);
+    check_resume_is_the_same_run("lppo", PPO, Stop::Kill);
 }
 
 #[test]
 fn an_ippo_run_stopped_by_sigterm_and_resumed_is_the_same_run() {
-    check_resume_is_the_same_run("ippo", Stop::Term);
+    check_resume_is_the_same_run("ippo", PPO, Stop::Term);
+}
+
+/// CRM-SAC's state holds its replay buffer: learning starts before the kill and the ring of
+/// 1,000 transitions has wrapped by then, so the resumed run samples from a restored ring.
+#[test]
+fn a_crm_sac_run_killed_and_resumed_is_the_same_run() {
+    let sac = r#"{"rollout_steps": 384, "learning_starts": 500, "buffer_size": 1000,
+        "batch_size": 64, "hidden": [64, 64], "updates_per_step": 0.125}"#;
+    check_resume_is_the_same_run("crm-sac", sac, Stop::Kill);
 }

@@ -107,17 +107,19 @@ impl Checkpoint {
             .map_err(|e| refuse(path, format!("cannot read tensors: {e}")))
     }
 
-    /// Writes CRM-SAC's networks, their observation statistics and the header to `path`.
+    /// Writes CRM-SAC's networks, their observation statistics, the header and `extra`
+    /// tensors (a run's training state, `state.rs`) to `path`.
     pub fn save_sac(
         nets: &crate::sac::SacNets,
         header: &CheckpointHeader,
+        extra: &[(String, candle_core::Tensor)],
         path: &Path,
     ) -> Result<()> {
         let header = CheckpointHeader {
             activation: Some(SAC_ACTIVATION.into()),
             ..header.clone()
         };
-        Self::save_normalized(&nets.params, nets.norm(), &header, &[], path)
+        Self::save_normalized(&nets.params, nets.norm(), &header, extra, path)
     }
 
     /// Writes named parameters with the observation statistics they were trained with.
@@ -557,7 +559,7 @@ mod tests {
             state: None,
         };
         let path = temp("sac.safetensors");
-        Checkpoint::save_sac(&nets, &header, &path).expect("save");
+        Checkpoint::save_sac(&nets, &header, &[], &path).expect("save");
         let (loaded, _) = Checkpoint::load_sac(&path, "abc123", "grasp-sim/test").expect("load");
         assert_eq!(loaded.norm(), nets.norm());
         let input = |n: &crate::sac::SacNets| -> Vec<f32> {

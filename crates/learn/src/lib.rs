@@ -20,6 +20,7 @@ pub mod noise;
 pub mod normalize;
 pub mod optim;
 pub mod ppo;
+pub mod replay;
 pub mod rollout;
 pub mod sac;
 pub mod state;

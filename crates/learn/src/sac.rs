@@ -5,6 +5,8 @@
 //! Dimensions outside the stage's action set are zero in every action, left out of
 //! log-probabilities, and the entropy target counts only the live ones.
 
+use std::collections::HashMap;
+
 use candle_core::{D, Device, Tensor, Var};
 use candle_nn::Linear;
 use crm_api::SacConfig;
@@ -15,10 +17,15 @@ use crate::network::{Layout, encode_normalized, mlp};
 use crate::noise::Noise;
 use crate::normalize::ObsNorm;
 use crate::optim::Adam;
+use crate::replay::{Replay, Transition};
 use crate::rollout::{Actor, Rollout};
+use crate::state::{self, SacRecord};
 
 /// Adam's epsilon for SAC: PyTorch's default, which Stable-Baselines3's SAC keeps.
 const SAC_ADAM_EPS: f64 = 1e-8;
+
+/// One fused Adam with the parameters it updates.
+type Optimizer = (Adam, Vec<(String, Var)>);
 
 const LOG_STD_MIN: f64 = -5.0;
 const LOG_STD_MAX: f64 = 2.0;
@@ -197,20 +204,6 @@ impl SacNets {
     }
 }
 
-/// One stored transition.
-#[derive(Clone, Debug)]
-struct Stored {
-    state: Vec<f32>,
-    stage: usize,
-    action: Vec<f32>,
-    mask: Vec<f32>,
-    reward: f32,
-    next_state: Vec<f32>,
-    next_stage: usize,
-    next_mask: Vec<f32>,
-    terminal: bool,
-}
-
 /// What one iteration of updates reports.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SacStats {
@@ -227,12 +220,10 @@ pub struct Sac {
     pub config: SacConfig,
     /// One fused Adam per loss, with the parameters it updates (no gradient clipping, as
     /// Stable-Baselines3's SAC).
-    actor_opt: (Adam, Vec<(String, Var)>),
-    critic_opt: (Adam, Vec<(String, Var)>),
-    alpha_opt: (Adam, Vec<(String, Var)>),
-    buffer: Vec<Stored>,
-    next_slot: usize,
-    seen: usize,
+    actor_opt: Optimizer,
+    critic_opt: Optimizer,
+    alpha_opt: Optimizer,
+    buffer: Replay,
     noise: Noise,
     /// Masks of the machine's stages, to fill `next_mask`.
     stage_masks: Vec<Vec<f32>>,
@@ -247,6 +238,7 @@ impl Sac {
         seed: u64,
     ) -> Result<Self> {
         config.validate()?;
+        let capacity = config.buffer_size;
         let nets = SacNets::new(layout, &config.hidden, seed)?;
         let adam = |params: Vec<(String, Var)>| {
             let adam = Adam::new(&params, config.learning_rate).with_eps(SAC_ADAM_EPS);
@@ -260,16 +252,15 @@ impl Sac {
             alpha_opt: adam(nets.named("log_alpha")),
             nets,
             config,
-            buffer: Vec::new(),
-            next_slot: 0,
-            seen: 0,
+            buffer: Replay::new(capacity),
             noise: Noise::new(seed ^ 0x5AC5_AC5A),
             stage_masks,
         })
     }
 
     /// Copies the networks of `other` (same layout and widths), keeping the optimizers bound
-    /// to this learner's: how a run resumes from a checkpoint. The replay buffer starts empty.
+    /// to this learner's: how a run resumes from a checkpoint (with [`Self::restore`] for the
+    /// rest of its training state; without, the replay buffer starts empty).
     pub fn load_weights(&mut self, other: &SacNets) -> Result<()> {
         if other.layout != self.nets.layout || other.hidden != self.nets.hidden {
             return Err(crate::Error::Config {
@@ -283,9 +274,68 @@ impl Sac {
         self.nets.set_norm(other.norm().clone())
     }
 
+    /// Everything but the weights that the next update depends on: the header's part and
+    /// the tensors (the three optimizers' moments, the replay buffer; `crate::state`).
+    pub fn state(&self) -> Result<(SacRecord, Vec<(String, Tensor)>)> {
+        let layout = self.nets.layout;
+        let (replay, mut tensors) = self.buffer.to_state(layout.state_width, layout.actions)?;
+        let mut adam_steps = Vec::new();
+        for (name, (adam, _)) in self.optimizers() {
+            let (step, m, v) = adam.state();
+            adam_steps.push(step);
+            tensors.extend(state::moment_tensors(&format!("sac.{name}"), m, v)?);
+        }
+        let record = SacRecord {
+            adam_steps,
+            noise: self.noise.state(),
+            replay,
+        };
+        Ok((record, tensors))
+    }
+
+    /// Goes on from a state of [`Self::state`] (with the weights loaded by
+    /// [`Self::load_weights`]).
+    pub fn restore(&mut self, record: &SacRecord, tensors: &HashMap<String, Tensor>) -> Result<()> {
+        if record.adam_steps.len() != 3 {
+            return Err(crate::Error::Length {
+                what: "CRM-SAC's optimizer steps",
+                expected: 3,
+                got: record.adam_steps.len(),
+            });
+        }
+        let names = ["actor", "critic", "alpha"];
+        for ((name, step), opt) in names.iter().zip(&record.adam_steps).zip([
+            &mut self.actor_opt,
+            &mut self.critic_opt,
+            &mut self.alpha_opt,
+        ]) {
+            let (m, v) = state::moments(&format!("sac.{name}"), opt.1.len(), tensors)?;
+            opt.0.restore(*step, m, v)?;
+        }
+        self.buffer = Replay::from_state(self.config.buffer_size, &record.replay, tensors)?;
+        self.noise = Noise::new(record.noise);
+        Ok(())
+    }
+
+    fn optimizers(&self) -> [(&'static str, &Optimizer); 3] {
+        [
+            ("actor", &self.actor_opt),
+            ("critic", &self.critic_opt),
+            ("alpha", &self.alpha_opt),
+        ]
+    }
+
+    /// The action mask of stage `stage` (none live past the machine's stages).
+    fn stage_mask(&self, stage: usize) -> Vec<f32> {
+        self.stage_masks
+            .get(stage)
+            .cloned()
+            .unwrap_or_else(|| vec![0.0; self.nets.layout.actions])
+    }
+
     /// Transitions stored so far (over the whole run).
     pub fn seen(&self) -> usize {
-        self.seen
+        self.buffer.seen()
     }
 
     fn normals(&mut self, rows: usize) -> Result<Tensor> {
@@ -301,35 +351,22 @@ impl Sac {
             self.nets.update_norm(&rollout.states, &rollout.stages);
         }
         for t in 0..rollout.len() {
-            let item = Stored {
+            self.buffer.push(Transition {
                 state: rollout.states[t].clone(),
                 stage: rollout.stages[t],
                 action: rollout.actions[t].clone(),
-                mask: rollout.masks[t].clone(),
                 reward: rollout.intra[t] + rollout.transition[t],
                 next_state: rollout.next_states[t].clone(),
                 next_stage: rollout.next_stages[t],
-                next_mask: self
-                    .stage_masks
-                    .get(rollout.next_stages[t])
-                    .cloned()
-                    .unwrap_or_else(|| vec![0.0; self.nets.layout.actions]),
                 terminal: rollout.terminal[t],
-            };
-            if self.buffer.len() < self.config.buffer_size {
-                self.buffer.push(item);
-            } else {
-                self.buffer[self.next_slot] = item;
-            }
-            self.next_slot = (self.next_slot + 1) % self.config.buffer_size;
-            self.seen += 1;
+            });
         }
     }
 
     /// Gradient steps for `env_steps` new environment steps (none before `learning_starts`).
     pub fn update(&mut self, env_steps: usize) -> Result<SacStats> {
         let mut stats = SacStats::default();
-        if self.seen < self.config.learning_starts || self.buffer.is_empty() {
+        if self.buffer.seen() < self.config.learning_starts || self.buffer.is_empty() {
             stats.alpha = self.nets.alpha()?;
             return Ok(stats);
         }
@@ -346,7 +383,7 @@ impl Sac {
     }
 
     /// One Adam step of `loss` on the optimizer's parameters.
-    fn descend(opt: &mut (Adam, Vec<(String, Var)>), loss: &Tensor) -> Result<()> {
+    fn descend(opt: &mut Optimizer, loss: &Tensor) -> Result<()> {
         let grads = loss.backward()?;
         opt.0.step(&opt.1, &grads, f32::INFINITY)?;
         Ok(())
@@ -359,8 +396,8 @@ impl Sac {
                 (self.noise.unit_f32() * self.buffer.len() as f32) as usize % self.buffer.len()
             })
             .collect();
-        let rows = |f: &dyn Fn(&Stored) -> Vec<f32>| -> Vec<Vec<f32>> {
-            picks.iter().map(|&i| f(&self.buffer[i])).collect()
+        let rows = |f: &dyn Fn(&Transition) -> Vec<f32>| -> Vec<Vec<f32>> {
+            picks.iter().map(|&i| f(self.buffer.get(i))).collect()
         };
         let device = self.nets.device.clone();
         let n = self.nets.layout.actions;
@@ -369,15 +406,24 @@ impl Sac {
         };
         let states = rows(&|s| s.state.clone());
         let next_states = rows(&|s| s.next_state.clone());
-        let stages: Vec<usize> = picks.iter().map(|&i| self.buffer[i].stage).collect();
-        let next_stages: Vec<usize> = picks.iter().map(|&i| self.buffer[i].next_stage).collect();
+        let stages: Vec<usize> = picks.iter().map(|&i| self.buffer.get(i).stage).collect();
+        let next_stages: Vec<usize> = picks
+            .iter()
+            .map(|&i| self.buffer.get(i).next_stage)
+            .collect();
         let actions = matrix(rows(&|s| s.action.clone()))?;
-        let masks = matrix(rows(&|s| s.mask.clone()))?;
-        let next_masks = matrix(rows(&|s| s.next_mask.clone()))?;
-        let rewards: Vec<f32> = picks.iter().map(|&i| self.buffer[i].reward).collect();
+        let masks = matrix(rows(&|s| self.stage_mask(s.stage)))?;
+        let next_masks = matrix(rows(&|s| self.stage_mask(s.next_stage)))?;
+        let rewards: Vec<f32> = picks.iter().map(|&i| self.buffer.get(i).reward).collect();
         let alive: Vec<f32> = picks
             .iter()
-            .map(|&i| if self.buffer[i].terminal { 0.0 } else { 1.0 })
+            .map(|&i| {
+                if self.buffer.get(i).terminal {
+                    0.0
+                } else {
+                    1.0
+                }
+            })
             .collect();
         let rewards = Tensor::from_vec(rewards, batch, &device)?;
         let alive = Tensor::from_vec(alive, batch, &device)?;
@@ -439,7 +485,7 @@ impl Actor for Sac {
         let rows = states.len();
         let n = self.nets.layout.actions;
         let mask = Tensor::from_vec(masks.concat(), (rows, n), &self.nets.device)?;
-        if !deterministic && self.seen < self.config.learning_starts {
+        if !deterministic && self.buffer.seen() < self.config.learning_starts {
             // Uniform exploration before learning starts.
             let data: Vec<f32> = (0..rows * n)
                 .map(|_| 2.0 * self.noise.unit_f32() - 1.0)

@@ -1,7 +1,9 @@
 //! A run's whole training state inside its checkpoint, so that a resumed run is the same run:
 //! everything the next iteration depends on besides the weights and observation statistics.
 //! Its scalars go in the header ([`RunState`]); its arrays are tensors of the same file:
-//! Adam's moments (`state.adam.m.I`, `state.adam.v.I`, one per parameter, flat) and each
+//! Adam's moments (PPO: `state.adam.m.I`, `state.adam.v.I`, one per parameter, flat;
+//! CRM-SAC: `state.sac.actor.m.I` and the same for `critic` and `alpha`), CRM-SAC's replay
+//! buffer (`state.replay.*`, [`crate::replay`]) and each
 //! environment's running episode as the actions that replay it from its seed
 //! (`state.env.K.actions`, steps x action dimensions; absent when the episode has just
 //! begun). The environments are deterministic per seed, so replaying those actions puts the
@@ -16,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::normalize::RunningMeanStd;
 use crate::ppo::PpoState;
+use crate::replay::ReplayRecord;
 use crate::rollout::EnvState;
 
 /// The header's part of a run's training state.
@@ -32,9 +35,12 @@ pub struct RunState {
     /// Each task's recent outcomes (the curriculum's counts), oldest first.
     pub tasks: Vec<Vec<bool>>,
     pub envs: Vec<EnvRecord>,
-    /// The PPO learner's scalars (absent for CRM-SAC, whose state is not kept).
+    /// The PPO learner's scalars (absent for CRM-SAC).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ppo: Option<PpoRecord>,
+    /// CRM-SAC's scalars (absent for the PPO learners).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sac: Option<SacRecord>,
 }
 
 /// One environment's scalars.
@@ -60,6 +66,16 @@ pub struct PpoRecord {
     pub return_stats: RunningMeanStd,
 }
 
+/// CRM-SAC's scalars.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SacRecord {
+    /// The step counts of the actor's, the critics' and the temperature's optimizers.
+    pub adam_steps: Vec<i32>,
+    /// The learner's noise (exploration, sampled actions, minibatch picks).
+    pub noise: u64,
+    pub replay: ReplayRecord,
+}
+
 /// This machine as [`RunState::made_on`] names it.
 pub fn this_machine() -> String {
     let model = std::fs::read_to_string("/proc/cpuinfo")
@@ -78,8 +94,43 @@ fn actions_name(k: usize) -> String {
     format!("state.env.{k}.actions")
 }
 
-fn adam_name(moment: &str, i: usize) -> String {
-    format!("state.adam.{moment}.{i}")
+fn moment_name(prefix: &str, moment: &str, i: usize) -> String {
+    format!("state.{prefix}.{moment}.{i}")
+}
+
+/// One optimizer's moments as tensors `state.PREFIX.m.I` and `state.PREFIX.v.I`.
+pub fn moment_tensors(
+    prefix: &str,
+    m: &[Vec<f32>],
+    v: &[Vec<f32>],
+) -> Result<Vec<(String, Tensor)>> {
+    let mut out = Vec::new();
+    for (moment, lists) in [("m", m), ("v", v)] {
+        for (i, values) in lists.iter().enumerate() {
+            let tensor = Tensor::from_vec(values.clone(), values.len(), &Device::Cpu)?;
+            out.push((moment_name(prefix, moment, i), tensor));
+        }
+    }
+    Ok(out)
+}
+
+/// Adam's first and second moments, one list per parameter.
+pub type Moments = (Vec<Vec<f32>>, Vec<Vec<f32>>);
+
+/// One optimizer's moments (`params` of each) from the tensors of [`moment_tensors`].
+pub fn moments(prefix: &str, params: usize, tensors: &HashMap<String, Tensor>) -> Result<Moments> {
+    let read = |moment: &str| -> Result<Vec<Vec<f32>>> {
+        (0..params)
+            .map(|i| {
+                let name = moment_name(prefix, moment, i);
+                Ok(tensors
+                    .get(&name)
+                    .ok_or_else(|| missing(&name))?
+                    .to_vec1::<f32>()?)
+            })
+            .collect()
+    };
+    Ok((read("m")?, read("v")?))
 }
 
 /// The tensors of a state: the environments' running episodes and, for PPO, Adam's moments.
@@ -96,12 +147,7 @@ pub fn tensors(envs: &[EnvState], ppo: Option<&PpoState>) -> Result<Vec<(String,
         }
     }
     if let Some(ppo) = ppo {
-        for (moment, lists) in [("m", &ppo.adam_m), ("v", &ppo.adam_v)] {
-            for (i, values) in lists.iter().enumerate() {
-                let tensor = Tensor::from_vec(values.clone(), values.len(), &Device::Cpu)?;
-                out.push((adam_name(moment, i), tensor));
-            }
-        }
+        out.extend(moment_tensors("adam", &ppo.adam_m, &ppo.adam_v)?);
     }
     Ok(out)
 }
@@ -152,21 +198,11 @@ pub fn ppo_state(
     params: usize,
     tensors: &HashMap<String, Tensor>,
 ) -> Result<PpoState> {
-    let moments = |moment: &str| -> Result<Vec<Vec<f32>>> {
-        (0..params)
-            .map(|i| {
-                let name = adam_name(moment, i);
-                Ok(tensors
-                    .get(&name)
-                    .ok_or_else(|| missing(&name))?
-                    .to_vec1::<f32>()?)
-            })
-            .collect()
-    };
+    let (adam_m, adam_v) = moments("adam", params, tensors)?;
     Ok(PpoState {
         adam_step: record.adam_step,
-        adam_m: moments("m")?,
-        adam_v: moments("v")?,
+        adam_m,
+        adam_v,
         noise: record.noise,
         returns: record.returns.clone(),
         return_stats: record.return_stats.clone(),
@@ -219,6 +255,7 @@ mod tests {
                 })
                 .collect(),
             ppo: None,
+            sac: None,
         };
         assert_eq!(env_states(&record, &tensors).expect("envs"), envs);
         let scalars = PpoRecord {

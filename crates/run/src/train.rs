@@ -1,13 +1,13 @@
 //! A training run: vectorized rollouts and learner updates (PPO, or SAC for crm-sac) inside
 //! the grasping CRM, one iteration at a time so that a caller (the CLI's progress bar, the
-//! service worker's heartbeat) can report between them and save checkpoints. A PPO-family
-//! run's checkpoint holds its whole training state until the run finishes
-//! (`crm_learn::state`), and a run resumed from one is the same run: the same metrics and the
-//! same final weights, bit for bit, as if it had never stopped (on the same build and CPU
-//! type). From a checkpoint without that state (CRM-SAC's, or one written before) a run keeps
-//! the steps already trained (so the learning-rate steps stay where they were) and reseeds
-//! its environments and noise from (seed, steps): reproducible, but not the uninterrupted
-//! run; a resumed SAC run starts with an empty replay buffer.
+//! service worker's heartbeat) can report between them and save checkpoints. A checkpoint
+//! holds the run's whole training state until the run finishes (`crm_learn::state`;
+//! CRM-SAC's with its replay buffer, `crm_learn::replay`), and a run resumed from one is the same run: the same metrics and the same final weights, bit for
+//! bit, as if it had never stopped (on the same build and CPU type). From a checkpoint
+//! without that state (one written before, or a finished run's) a run keeps the steps already
+//! trained (so the learning-rate steps stay where they were) and reseeds its environments and
+//! noise from (seed, steps): reproducible, but not the uninterrupted run; a SAC run so
+//! resumed starts with an empty replay buffer.
 
 use std::path::Path;
 use std::time::Instant;
@@ -180,6 +180,12 @@ impl Trainer {
             if let Some(nets) = &resume_sac {
                 sac.load_weights(nets)
                     .context("resuming from the checkpoint")?;
+            }
+            if let Some((state, tensors)) = &exact
+                && let Some(record) = &state.sac
+            {
+                sac.restore(record, tensors)
+                    .context("resuming the optimizers and the replay buffer from the checkpoint")?;
             }
             Learner::Sac(Box::new(sac))
         } else {
@@ -480,13 +486,31 @@ impl Trainer {
     }
 
     /// The run's training state besides the networks: the header's part and the tensors.
-    fn state(
-        &self,
-        ppo: &crm_learn::Ppo,
-    ) -> Result<(RunState, Vec<(String, candle_core::Tensor)>)> {
+    fn state(&self) -> Result<(RunState, Vec<(String, candle_core::Tensor)>)> {
         let envs = self.envs.states();
-        let learner = ppo.state();
-        let tensors = run_state::tensors(&envs, Some(&learner))?;
+        let mut tensors = run_state::tensors(&envs, None)?;
+        let (mut ppo, mut sac) = (None, None);
+        match &self.learner {
+            Learner::Ppo(learner) => {
+                let learner = learner.state();
+                tensors.extend(run_state::moment_tensors(
+                    "adam",
+                    &learner.adam_m,
+                    &learner.adam_v,
+                )?);
+                ppo = Some(PpoRecord {
+                    adam_step: learner.adam_step,
+                    noise: learner.noise,
+                    returns: learner.returns,
+                    return_stats: learner.return_stats,
+                });
+            }
+            Learner::Sac(learner) => {
+                let (record, more) = learner.state()?;
+                tensors.extend(more);
+                sac = Some(record);
+            }
+        }
         let records = envs
             .iter()
             .zip(self.envs.envs())
@@ -508,12 +532,8 @@ impl Trainer {
             last_100: self.last_100.outcomes(),
             tasks: self.tasks.outcomes(),
             envs: records,
-            ppo: Some(PpoRecord {
-                adam_step: learner.adam_step,
-                noise: learner.noise,
-                returns: learner.returns,
-                return_stats: learner.return_stats,
-            }),
+            ppo,
+            sac,
         };
         Ok((state, tensors))
     }
@@ -521,6 +541,17 @@ impl Trainer {
     /// Writes the current networks as a checkpoint (with the training state while the run
     /// is unfinished).
     pub fn save(&self, path: &Path) -> Result<()> {
+        self.save_as(path, !self.finished())
+    }
+
+    /// Writes the current networks alone, without the training state: for a place that
+    /// cannot take the whole state (a coordinator whose checkpoint limit a large replay
+    /// buffer exceeds). A run resumed from it goes on as from an older checkpoint.
+    pub fn save_policy(&self, path: &Path) -> Result<()> {
+        self.save_as(path, false)
+    }
+
+    fn save_as(&self, path: &Path, with_state: bool) -> Result<()> {
         let header = CheckpointHeader {
             format: FORMAT.to_string(),
             algorithm: self.spec.algorithm.name().to_string(),
@@ -546,18 +577,19 @@ impl Trainer {
         };
         // Write beside and rename, so a reader never sees half a checkpoint.
         let partial = path.with_extension("safetensors.partial");
+        let (header, tensors) = if !with_state {
+            (header, Vec::new())
+        } else {
+            let (state, tensors) = self.state()?;
+            let header = CheckpointHeader {
+                state: Some(state),
+                ..header
+            };
+            (header, tensors)
+        };
         match &self.learner {
-            // An unfinished run keeps its whole training state; a finished one the policy.
-            Learner::Ppo(ppo) if !self.finished() => {
-                let (state, tensors) = self.state(ppo)?;
-                let header = CheckpointHeader {
-                    state: Some(state),
-                    ..header
-                };
-                Checkpoint::save_with(&ppo.net, &header, &tensors, &partial)?
-            }
-            Learner::Ppo(ppo) => Checkpoint::save(&ppo.net, &header, &partial)?,
-            Learner::Sac(sac) => Checkpoint::save_sac(&sac.nets, &header, &partial)?,
+            Learner::Ppo(ppo) => Checkpoint::save_with(&ppo.net, &header, &tensors, &partial)?,
+            Learner::Sac(sac) => Checkpoint::save_sac(&sac.nets, &header, &tensors, &partial)?,
         }
         std::fs::rename(&partial, path).map_err(|error| Error::Io {
             path: format!("moving the checkpoint to {}", path.display()),

@@ -332,7 +332,11 @@ impl Coordinator for CoordinatorService {
         };
         let max = self.state.config.max_checkpoint_bytes;
         if meta.size > max {
-            return Err(ErrorKind::InvalidField.status(format!("meta.size: over {max} bytes")));
+            return Err(ErrorKind::TooLarge.status(format!(
+                "meta.size: {} bytes, over this coordinator's limit of {max} \
+                 (crm-server --max-checkpoint-bytes)",
+                meta.size
+            )));
         }
         let dir = self.state.store.checkpoint_dir();
         let name = format!(

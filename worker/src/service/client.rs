@@ -183,11 +183,15 @@ impl Client {
                 lease_token: self.lease_token.clone(),
             })),
         };
-        let chunks: Vec<pb::CheckpointChunk> = std::iter::once(meta)
-            .chain(bytes.chunks(CHUNK).map(|c| pb::CheckpointChunk {
-                body: Some(checkpoint_chunk::Body::Data(c.to_vec())),
-            }))
-            .collect();
+        // Chunks are cut as the stream sends them: a checkpoint with a replay buffer is
+        // hundreds of megabytes, held once.
+        let total = bytes.len();
+        let chunks = std::iter::once(meta).chain((0..total.div_ceil(CHUNK)).map(move |i| {
+            let end = ((i + 1) * CHUNK).min(total);
+            pb::CheckpointChunk {
+                body: Some(checkpoint_chunk::Body::Data(bytes[i * CHUNK..end].to_vec())),
+            }
+        }));
         let reply = self
             .inner
             .clone()

@@ -249,20 +249,43 @@ fn train(
     let mut last_upload = Instant::now();
     // (steps, id) of the newest upload, so the final one is not sent twice.
     let mut uploaded: Option<(u64, i64)> = None;
+    // Whether the coordinator refused a checkpoint with the training state for its size.
+    let mut state_refused = false;
     let mut upload = |trainer: &Trainer| -> anyhow::Result<i64> {
         if let Some((steps, id)) = uploaded
             && steps == trainer.steps()
         {
             return Ok(id);
         }
-        trainer.save(&path)?;
-        let id = link
-            .handle
-            .block_on(
+        if state_refused {
+            trainer.save_policy(&path)?;
+        } else {
+            trainer.save(&path)?;
+        }
+        let send = |path: &Path| {
+            link.handle.block_on(
                 link.client
-                    .upload(job.job_id, algorithm, trainer.steps(), &path),
+                    .upload(job.job_id, algorithm, trainer.steps(), path),
             )
-            .context("uploading a checkpoint")?;
+        };
+        let id = match send(&path) {
+            // The whole training state (a large replay buffer) is over the coordinator's
+            // limit: the policy alone from now on, so that the run goes on; a resume will
+            // not be the same run.
+            Err(error) if !state_refused && !trainer.finished() && too_large(&error).is_some() => {
+                state_refused = true;
+                eprintln!(
+                    "job {}: the checkpoint with its training state is refused ({}); \
+                     uploading the policy alone from now on",
+                    job.job_id,
+                    too_large(&error).unwrap_or_default()
+                );
+                trainer.save_policy(&path)?;
+                send(&path)
+            }
+            other => other,
+        }
+        .context("uploading a checkpoint")?;
         uploaded = Some((trainer.steps(), id));
         Ok(id)
     };
@@ -439,4 +462,13 @@ fn ship(link: &Link, job: i64, recorder: Option<&SharedRecorder>) {
             tracing::warn!(job, err = %format!("{err:#}"), "a recording append failed; those episodes are not kept")
         }
     }
+}
+
+/// The coordinator's message when an upload was refused for its size (gRPC
+/// `RESOURCE_EXHAUSTED`).
+fn too_large(error: &anyhow::Error) -> Option<String> {
+    error
+        .downcast_ref::<tonic::Status>()
+        .filter(|status| status.code() == tonic::Code::ResourceExhausted)
+        .map(|status| status.message().to_string())
 }
