@@ -203,7 +203,7 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
     let dir = temp("study");
     let (out, data) = (dir.join("docs"), dir.join("data"));
     let study = out.join("results").join("builtin");
-    // Interrupted mid-training: killed while its first training job runs.
+    // Interrupted mid-training: stopped while its first training job runs.
     let log = dir.join("first.log");
     let mut first = crm()
         .args(study_args(&out, &data, "1"))
@@ -230,14 +230,45 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    first.kill().expect("kill");
-    first.wait().expect("reap");
+    // SIGTERM (a batch system's time limit): the local worker ends its job at the
+    // iteration's end with a checkpoint and gives it back, and the command stops.
+    let sent = Command::new("kill")
+        .args(["-TERM", &first.id().to_string()])
+        .status()
+        .expect("kill -TERM");
+    assert!(sent.success());
+    let asked = Instant::now();
+    let status = loop {
+        if let Some(status) = first.try_wait().expect("wait") {
+            break status;
+        }
+        assert!(
+            asked.elapsed() < Duration::from_secs(30),
+            "no exit within 30 s of SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    assert!(!status.success(), "an interrupted study is no success");
+    assert!(text.contains("run the same command to continue"), "{text}");
     assert!(
         !study.join("crm-ppo/seed-0/run.json").exists(),
-        "killed before any run landed"
+        "interrupted before any run landed"
     );
-    // The same command continues it: the interrupted job is leased again and finishes.
+    // The same command continues it: the interrupted job is leased again and resumes from
+    // the checkpoint its worker uploaded when it stopped.
     succeeded(crm().args(study_args(&out, &data, "1")), "crm results");
+    let resumed: Value = serde_json::from_slice(
+        &std::fs::read(study.join("crm-ppo/seed-0/run.json")).expect("run.json"),
+    )
+    .expect("json");
+    assert_eq!(resumed["leases"], 2, "{resumed}");
+    assert!(
+        resumed["resumed_from_steps"]
+            .as_u64()
+            .is_some_and(|s| s > 0),
+        "{resumed}"
+    );
     // Once finished, the same command trains nothing and changes no run.
     let kept = std::fs::read(study.join("crm-ppo/seed-0/checkpoint.safetensors")).expect("kept");
     let done = succeeded(crm().args(study_args(&out, &data, "1")), "crm results");

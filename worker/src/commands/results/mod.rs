@@ -18,7 +18,6 @@ pub mod stats;
 mod study;
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -143,7 +142,8 @@ pub fn run(args: ResultsArgs) -> anyhow::Result<()> {
     match &args.coordinator {
         Some(url) => {
             let rest = Rest::new(url, args.token.clone(), args.ca.as_deref())?;
-            study(&args, &rest, ppo, sac)
+            // The coordinator's workers go on without this client: a signal ends it at once.
+            study(&args, &rest, ppo, sac, &AtomicBool::new(false))
         }
         None => local(&args, ppo, sac),
     }
@@ -161,7 +161,11 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
         ..crm_server::ServerConfig::default()
     };
     let running = runtime.block_on(crm_server::start(config))?;
-    let stop = Arc::new(AtomicBool::new(false));
+    // SIGTERM or SIGINT: each local worker ends its job where it can resume (a training job
+    // at the iteration's end with a checkpoint), gives it back and stops; then the study
+    // stops, and the same command continues it.
+    let stop = crate::service::stop_on_signals()?;
+    let mut workers = Vec::new();
     for k in 0..args.workers.max(1) {
         let options = WorkerOptions {
             coordinator: format!("http://{}", running.grpc_addr),
@@ -176,11 +180,11 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
             idle_exit_s: None,
         };
         let stop = stop.clone();
-        runtime.spawn(async move {
+        workers.push(runtime.spawn(async move {
             if let Err(err) = run_worker(options, stop).await {
                 eprintln!("local worker stopped: {err:#}");
             }
-        });
+        }));
     }
     let url = format!("http://{}", running.http_addr);
     eprintln!(
@@ -188,8 +192,23 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
         args.data_dir.display()
     );
     let rest = Rest::new(&url, args.token.clone(), None)?;
-    let result = study(args, &rest, ppo, sac);
+    let result = study(args, &rest, ppo, sac, &stop);
     stop.store(true, Ordering::Relaxed);
+    // The workers give their jobs back (with a checkpoint) before the coordinator stops;
+    // within `crm worker`'s default grace period.
+    let all = async {
+        for worker in workers {
+            worker.await.ok();
+        }
+    };
+    if runtime
+        .block_on(async { tokio::time::timeout(Duration::from_secs(25), all).await })
+        .is_err()
+    {
+        eprintln!(
+            "a local worker did not stop within 25 s; its job is queued again when its lease expires"
+        );
+    }
     runtime.block_on(running.stop())?;
     runtime.shutdown_timeout(Duration::from_secs(2));
     result
@@ -197,7 +216,13 @@ fn local(args: &ResultsArgs, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<(
 
 /// Runs (or continues, or extends) the study of `args` on the coordinator at `rest`,
 /// rebuilding the report after every run that lands and at the end.
-fn study(args: &ResultsArgs, rest: &Rest, ppo: PpoConfig, sac: SacConfig) -> anyhow::Result<()> {
+fn study(
+    args: &ResultsArgs,
+    rest: &Rest,
+    ppo: PpoConfig,
+    sac: SacConfig,
+    stop: &AtomicBool,
+) -> anyhow::Result<()> {
     let world = args.world.clone().unwrap_or_else(|| "crm".into());
     let name = args.name.clone().unwrap_or_else(|| {
         if world == "crm" {
@@ -270,7 +295,9 @@ fn study(args: &ResultsArgs, rest: &Rest, ppo: PpoConfig, sac: SacConfig) -> any
         file.seeds.len(),
         dir.display()
     );
-    study::run(rest, &dir, &file, |_, _| write_report(&args.out, args.reps))?;
+    study::run(rest, &dir, &file, stop, |_, _| {
+        write_report(&args.out, args.reps)
+    })?;
     write_report(&args.out, args.reps)
 }
 
@@ -293,7 +320,8 @@ fn extend(
     let (old, new) = (fields(before)?, fields(&asked)?);
     if let Some((key, value)) = old.iter().find(|(k, v)| new.get(*k) != Some(*v)) {
         bail!(
-            "{}: the study was run with {key} = {value}; this command asks {}: run it with the              study's settings to continue it, or give another --name",
+            "{}: the study was run with {key} = {value}; this command asks {}: run it with the \
+             study's settings to continue it, or give another --name",
             path.display(),
             new.get(key).cloned().unwrap_or_default()
         );

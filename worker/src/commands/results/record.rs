@@ -65,6 +65,9 @@ pub struct RunFile {
     /// it was resumed from a checkpoint).
     pub train_wall_s: f64,
     pub leases: u64,
+    /// The step its last lease resumed from (its checkpoint's), when it was resumed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resumed_from_steps: Option<u64>,
     /// Seconds of its sampled and its deterministic evaluation.
     pub eval_wall_s: f64,
     pub eval_deterministic_wall_s: f64,

@@ -8,6 +8,7 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
@@ -207,6 +208,7 @@ fn write_run(rest: &Rest, dir: &Path, done: &Finished) -> anyhow::Result<()> {
         stopped_early: train["result"]["stopped_early"].as_bool().unwrap_or(false),
         train_wall_s: wall_s(train),
         leases: train["attempts"].as_u64().unwrap_or(1),
+        resumed_from_steps: train["result"]["resumed_from_steps"].as_u64(),
         eval_wall_s: wall_s(&done.eval),
         eval_deterministic_wall_s: wall_s(&done.deterministic),
         train_job: id,
@@ -217,11 +219,13 @@ fn write_run(rest: &Rest, dir: &Path, done: &Finished) -> anyhow::Result<()> {
 }
 
 /// Runs the study in `dir` on the coordinator at `rest` until every run is on disk; calls
-/// `landed` after each run is written (the caller rebuilds the report then).
+/// `landed` after each run is written (the caller rebuilds the report then). Returns early,
+/// with an error saying so, once `stop` is set.
 pub fn run(
     rest: &Rest,
     dir: &Path,
     study: &StudyFile,
+    stop: &AtomicBool,
     mut landed: impl FnMut(&str, u64) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
     // The runs this invocation submitted: one missing again was cancelled or lost, and is
@@ -284,7 +288,15 @@ pub fn run(
         if open == 0 {
             break;
         }
-        std::thread::sleep(Duration::from_secs(5));
+        for _ in 0..20 {
+            if stop.load(Ordering::Relaxed) {
+                bail!(
+                    "stopped by a signal before the study finished (the runs on disk are kept; \
+                     run the same command to continue)"
+                );
+            }
+            std::thread::sleep(Duration::from_millis(250));
+        }
     }
     if !failures.is_empty() {
         let lines: Vec<String> = failures
