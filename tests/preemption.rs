@@ -164,3 +164,64 @@ fn a_checkpoint_over_the_coordinators_limit_goes_up_as_the_policy_alone() {
     assert_eq!(header["steps"], mid_run["steps"]);
     assert!(header.get("state").is_none(), "the policy alone: {header}");
 }
+
+/// An evaluation stopped by SIGTERM stops after its current episode and is given back with
+/// where it stood: the next worker goes on from there, the episodes done kept, and the report
+/// and the stored episodes are those of an evaluation never interrupted.
+#[test]
+fn a_preempted_evaluation_goes_on_from_its_episodes_done() {
+    let data = TempDir::new("preempt-eval");
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let server = start_server(&data.0, &["--models", models.to_str().expect("utf-8 path")]);
+    let addr = server.http.clone();
+    let grpc = format!("http://{}", server.grpc);
+    let shipped = get(&addr, "/api/v1/checkpoints?uploaded=true")["checkpoints"][0]["id"]
+        .as_i64()
+        .expect("the shipped model");
+    let eval = format!(
+        r#"{{"kind": "eval", "checkpoint_id": {shipped}, "episodes": 300, "seed": 4, "tasks": ["mouse-press", "mug-wrap", "valve-twist"]}}"#
+    );
+    let episodes = |id: i64| -> Vec<Value> {
+        get(&addr, &format!("/api/v1/evaluations/{id}"))["episodes"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default()
+    };
+    let mut first = start_worker(&grpc, &["--name", "first"]);
+    let id = submit(&addr, &eval)["id"].as_i64().expect("id");
+    wait_for(240, "twenty episodes", || {
+        (episodes(id).len() >= 20).then_some(())
+    });
+    let sent = Command::new("kill")
+        .args(["-TERM", &first.0.id().to_string()])
+        .status()
+        .expect("kill -TERM");
+    assert!(sent.success());
+    assert!(exit_within(&mut first, 25).success(), "SIGTERM exits 0");
+    let job = wait_state(&addr, id, "queued", 5);
+    assert_eq!(job["attempts"], 1);
+    let done = episodes(id).len();
+    assert!((20..300).contains(&done), "{done} episodes kept");
+
+    let mut second = start_worker(&grpc, &["--max-jobs", "2", "--name", "second"]);
+    let finished = wait_state(&addr, id, "succeeded", 300);
+    assert_eq!(finished["attempts"], 2);
+    let reference = submit(&addr, &eval)["id"].as_i64().expect("id");
+    let whole = wait_state(&addr, reference, "succeeded", 300);
+    assert!(exit_within(&mut second, 30).success());
+    // It went on from the episodes done (all of them stored, or the newest 200).
+    let mut result = finished["result"].clone();
+    let from = result
+        .as_object_mut()
+        .and_then(|r| r.remove("resumed_from_episodes"))
+        .and_then(|v| v.as_u64())
+        .expect("resumed_from_episodes");
+    assert!(
+        from as usize == done || (done == 200 && from >= 200),
+        "{from} vs {done}"
+    );
+    assert_eq!(result, whole["result"], "the same report");
+    assert_eq!(result["episodes"], 300);
+    // The episode summaries: none twice, none missing (the newest 200 are kept).
+    assert_eq!(episodes(id), episodes(reference));
+}

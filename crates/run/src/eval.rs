@@ -8,7 +8,7 @@ use candle_core::{Device, Tensor};
 use crm_api::{EvalReport, EvalSpec, Row};
 use crm_learn::{Actor, Checkpoint, Layout, Noise, Ppo, PpoConfig, SacNets};
 use grasp_sim::SimConfig;
-use grasp_sim::benchmark::Objective;
+use serde::{Deserialize, Serialize};
 
 use crate::Env;
 use crate::error::{Context, Error, Result, invalid};
@@ -124,7 +124,7 @@ impl LoadedPolicy {
 }
 
 /// Running sums of one row of the report.
-#[derive(Default)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 struct Sums {
     episodes: u64,
     successes: u64,
@@ -144,17 +144,33 @@ impl Sums {
         *self.outcomes.entry(outcome.to_string()).or_default() += 1;
     }
 
-    fn row(self) -> Row {
+    fn row(&self) -> Row {
         let n = self.episodes.max(1) as f64;
         Row {
             success_rate: self.successes as f64 / n,
             mean_episode_length: self.control_steps as f64 / n,
             episodes: self.episodes,
             mean_sim_seconds: self.seconds / n,
-            outcomes: self.outcomes,
+            outcomes: self.outcomes.clone(),
             authors_judge: Some(self.authors as f64 / n),
         }
     }
+}
+
+/// Where an evaluation stands after its first `done` episodes: all it needs to go on from the
+/// next one exactly as if it had never stopped (each episode's seed follows from its index;
+/// the policy's noise generator and the report's running sums are here). A worker stopped
+/// mid-evaluation gives it back to the coordinator with the job, and the next worker goes on
+/// from it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct EvalProgress {
+    pub done: u64,
+    /// The policy's noise generator (a sampled evaluation's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<u64>,
+    per_objective: BTreeMap<String, Sums>,
+    per_task: BTreeMap<String, Sums>,
+    overall: Sums,
 }
 
 /// Evaluates the checkpoint at `path`. After each episode `progress(done, total, record)` is
@@ -166,8 +182,29 @@ pub fn evaluate(
     recorder: Option<SharedRecorder>,
     progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
 ) -> Result<EvalReport> {
+    evaluate_from(
+        path,
+        spec,
+        env,
+        recorder,
+        &mut EvalProgress::default(),
+        progress,
+    )
+}
+
+/// [`evaluate`] going on from `from` (a fresh one: `EvalProgress::default()`), which it keeps
+/// current after each episode: when `progress` stops the evaluation, `from` says where to go
+/// on.
+pub fn evaluate_from(
+    path: &Path,
+    spec: &EvalSpec,
+    env: &Env,
+    recorder: Option<SharedRecorder>,
+    from: &mut EvalProgress,
+    progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
+) -> Result<EvalReport> {
     let config = env.config_for(spec.objective, spec.hold_s)?;
-    evaluate_in(path, spec, env, config, recorder, progress)
+    run_from(path, spec, env, config, recorder, from, progress)
 }
 
 /// [`evaluate`] in the world's settings `config` (benchmarks compare settings on the same
@@ -178,9 +215,40 @@ pub fn evaluate_in(
     env: &Env,
     config: SimConfig,
     recorder: Option<SharedRecorder>,
+    progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
+) -> Result<EvalReport> {
+    let mut fresh = EvalProgress::default();
+    run_from(path, spec, env, config, recorder, &mut fresh, progress)
+}
+
+fn run_from(
+    path: &Path,
+    spec: &EvalSpec,
+    env: &Env,
+    config: SimConfig,
+    recorder: Option<SharedRecorder>,
+    from: &mut EvalProgress,
     mut progress: impl FnMut(u64, u64, &EpisodeRecord) -> bool,
 ) -> Result<EvalReport> {
     spec.validate().map_err(|err| invalid!("{err}"))?;
+    if from.done > spec.episodes || (from.done > 0 && from.noise.is_some() == spec.deterministic) {
+        return Err(invalid!(
+            "the evaluation's progress ({} episodes done, {}) does not fit its spec ({} \
+             episodes, {})",
+            from.done,
+            if from.noise.is_some() {
+                "sampled"
+            } else {
+                "deterministic"
+            },
+            spec.episodes,
+            if spec.deterministic {
+                "deterministic"
+            } else {
+                "sampled"
+            }
+        ));
+    }
     let benchmark = env.benchmark()?;
     let mut policy = LoadedPolicy::load(path, env, &config)?;
     let (algorithm, trained_steps) = (policy.algorithm.clone(), policy.trained_steps);
@@ -189,14 +257,14 @@ pub fn evaluate_in(
     let grasp = env.grasp_env(config, &choice)?;
     let recorded = Recorded::new(grasp, machine.clone(), recorder);
     let mut crm_env = crm::CrmEnv::new(machine, recorded, crm::RewardMode::Crm);
-    // The policy's noise when it samples (the default, as the paper's evaluation): seeded.
-    let mut noise = (!spec.deterministic).then(|| Noise::new(spec.seed ^ 0x00E7_A1ED_5EED));
-    // Per objective and per task: episodes, successes, control steps, simulated seconds,
-    // outcomes.
-    let mut sums: BTreeMap<Objective, Sums> = BTreeMap::new();
-    let mut task_sums: BTreeMap<String, Sums> = BTreeMap::new();
-    let mut overall = Sums::default();
-    for k in 0..spec.episodes {
+    // The policy's noise when it samples (the default, as the paper's evaluation): seeded, or
+    // where the progress left it.
+    let mut noise = if from.done == 0 {
+        (!spec.deterministic).then(|| Noise::new(spec.seed ^ 0x00E7_A1ED_5EED))
+    } else {
+        from.noise.map(Noise::new)
+    };
+    for k in from.done..spec.episodes {
         let seed = spec.seed.wrapping_mul(1_000_003).wrapping_add(k);
         let (mut stage, mut state) = crm_env.reset(seed).context("reset")?;
         let objective = crm_env.env().inner().objective();
@@ -219,13 +287,19 @@ pub fn evaluate_in(
         let seconds = f64::from(crm_env.env().inner().sim_seconds());
         let authors = crm_env.env().inner().authors_judge();
         let task = crm_env.env().inner().task().id.clone();
+        // Per objective and per task, and overall: episodes, successes, control steps,
+        // simulated seconds, outcomes.
         for entry in [
-            sums.entry(objective).or_default(),
-            task_sums.entry(task).or_default(),
-            &mut overall,
+            from.per_objective
+                .entry(objective.name().to_string())
+                .or_default(),
+            from.per_task.entry(task).or_default(),
+            &mut from.overall,
         ] {
             entry.add(success, authors, length, seconds, &outcome);
         }
+        from.done = k + 1;
+        from.noise = noise.as_ref().map(Noise::state);
         let machine = crm_env.machine();
         let episode = crm_env.episode();
         let record = EpisodeRecord {
@@ -256,7 +330,7 @@ pub fn evaluate_in(
             });
         }
     }
-    let overall = overall.row();
+    let overall = from.overall.row();
     Ok(EvalReport {
         algorithm,
         trained_steps,
@@ -267,13 +341,76 @@ pub fn evaluate_in(
         mean_sim_seconds: overall.mean_sim_seconds,
         objective: spec.objective,
         deterministic: spec.deterministic,
-        per_objective: sums
-            .into_iter()
-            .map(|(o, s)| (o.name().to_string(), s.row()))
+        per_objective: from
+            .per_objective
+            .iter()
+            .map(|(o, s)| (o.clone(), s.row()))
             .collect(),
-        per_task: task_sums.into_iter().map(|(t, s)| (t, s.row())).collect(),
+        per_task: from
+            .per_task
+            .iter()
+            .map(|(t, s)| (t.clone(), s.row()))
+            .collect(),
         outcomes: overall.outcomes,
         hold_s: spec.hold_s,
         authors_judge: overall.authors_judge,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped() -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/crm-ppo.safetensors")
+    }
+
+    fn spec(deterministic: bool) -> EvalSpec {
+        serde_json::from_value(serde_json::json!({
+            "episodes": 6,
+            "seed": 11,
+            "deterministic": deterministic,
+            "tasks": ["mouse-press", "mug-wrap", "valve-twist"],
+        }))
+        .expect("spec")
+    }
+
+    #[test]
+    fn an_evaluation_stopped_and_gone_on_from_its_progress_gives_the_same_report() {
+        let env = Env::default();
+        for deterministic in [false, true] {
+            let spec = spec(deterministic);
+            let whole = evaluate(&shipped(), &spec, &env, None, |_, _, _| true).expect("whole");
+            let mut progress = EvalProgress::default();
+            let stopped = evaluate_from(
+                &shipped(),
+                &spec,
+                &env,
+                None,
+                &mut progress,
+                |done, _, _| done < 4,
+            );
+            assert!(stopped.is_err(), "stopped after 4 episodes");
+            assert_eq!(progress.done, 4);
+            assert_eq!(progress.noise.is_some(), !deterministic);
+            // As the coordinator keeps it: JSON.
+            let text = serde_json::to_string(&progress).expect("json");
+            let mut back: EvalProgress = serde_json::from_str(&text).expect("json");
+            assert_eq!(back, progress);
+            let mut seen = Vec::new();
+            let gone_on = evaluate_from(&shipped(), &spec, &env, None, &mut back, |done, _, _| {
+                seen.push(done);
+                true
+            })
+            .expect("gone on");
+            assert_eq!(seen, [5, 6], "only the episodes not done");
+            assert_eq!(gone_on, whole);
+            // Progress of the other kind of evaluation is refused.
+            let mut other = progress.clone();
+            other.noise = if deterministic { Some(1) } else { None };
+            let err = evaluate_from(&shipped(), &spec, &env, None, &mut other, |_, _, _| true)
+                .expect_err("refused");
+            assert!(err.to_string().contains("does not fit its spec"), "{err}");
+        }
+    }
 }

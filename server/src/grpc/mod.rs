@@ -25,6 +25,10 @@ mod recording;
 /// Bytes per checkpoint chunk sent to workers.
 pub const CHUNK: usize = 256 * 1024;
 
+/// Largest evaluation progress a worker may give back: its running sums per objective and
+/// per task (a few kilobytes for the built-in benchmark's 26 tasks).
+const MAX_EVAL_PROGRESS_BYTES: usize = 1 << 20;
+
 /// Refuses calls without a token holding `scope` (`crate::auth`): `Unauthenticated` without a
 /// known token, `PermissionDenied` with one lacking the scope.
 #[derive(Clone)]
@@ -180,6 +184,14 @@ impl Coordinator for CoordinatorService {
         let Some(job) = leased.map_err(status)? else {
             return Ok(Response::new(pb::LeaseReply { job: None }));
         };
+        let eval_progress_json = match job.kind.as_str() {
+            "eval" => store
+                .eval_resume(job.id)
+                .await
+                .map_err(status)?
+                .unwrap_or_default(),
+            _ => String::new(),
+        };
         let checkpoint_id = match job.kind.as_str() {
             "eval" => job.checkpoint_id.unwrap_or(0),
             _ => store
@@ -204,6 +216,7 @@ impl Coordinator for CoordinatorService {
                 checkpoint_id,
                 attempt: u32::try_from(job.attempts - 1).unwrap_or(0),
                 lease_token: token,
+                eval_progress_json,
             }),
         }))
     }
@@ -539,9 +552,26 @@ impl Coordinator for CoordinatorService {
         let hash = self
             .require_lease(&r.worker_id, r.job_id, &r.lease_token)
             .await?;
+        let progress = match r.eval_progress_json.as_str() {
+            "" => None,
+            text => {
+                let kind = self.state.store.job(r.job_id).await.map_err(status)?.kind;
+                let parsed: Option<serde_json::Value> = serde_json::from_str(text).ok();
+                let fits = parsed
+                    .as_ref()
+                    .is_some_and(|v| v.is_object() && v["done"].is_u64());
+                if kind != "eval" || text.len() > MAX_EVAL_PROGRESS_BYTES || !fits {
+                    return Err(ErrorKind::InvalidField.status(format!(
+                        "eval_progress_json: an evaluation's progress, a JSON object with \
+                         \"done\" of at most {MAX_EVAL_PROGRESS_BYTES} bytes"
+                    )));
+                }
+                Some(text)
+            }
+        };
         self.state
             .store
-            .release(Lease::new(&r.worker_id, r.job_id, &hash))
+            .release(Lease::new(&r.worker_id, r.job_id, &hash), progress)
             .await
             .map_err(status)?;
         tracing::info!(

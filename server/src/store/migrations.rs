@@ -12,7 +12,7 @@ use sqlx::error::BoxDynError;
 use sqlx::migrate::{Migration, MigrationSource, MigrationType, Migrator};
 
 /// Every migration file, by name, with its text.
-const FILES: [(&str, &str); 7] = [
+const FILES: [(&str, &str); 8] = [
     (
         "20261122000001_init.sql",
         include_str!("../../../migrations/20261122000001_init.sql"),
@@ -40,6 +40,10 @@ const FILES: [(&str, &str); 7] = [
     (
         "20261127000001_lease_tokens.sql",
         include_str!("../../../migrations/20261127000001_lease_tokens.sql"),
+    ),
+    (
+        "20261128000001_eval_progress.sql",
+        include_str!("../../../migrations/20261128000001_eval_progress.sql"),
     ),
 ];
 

@@ -585,11 +585,15 @@ impl Store {
 
     /// Gives a running job back to the queue at once (its worker was preempted or is
     /// stopping); the next lease resumes it from its newest checkpoint.
-    pub async fn release(&self, lease: Lease<'_>) -> Result<()> {
-        let done = sqlx::query("UPDATE jobs SET state = 'queued', worker_id = NULL, lease_expires_at = NULL, phase = NULL WHERE id = ? AND worker_id = ? AND lease_hash = ? AND state = 'running'")
+    /// Gives a job back to the queue; an evaluation with where it stood (`eval_progress`,
+    /// the worker's JSON), which the next lease goes on from, keeping the episode summaries
+    /// stored so far.
+    pub async fn release(&self, lease: Lease<'_>, eval_progress: Option<&str>) -> Result<()> {
+        let done = sqlx::query("UPDATE jobs SET state = 'queued', worker_id = NULL, lease_expires_at = NULL, phase = NULL, eval_progress = COALESCE(?4, eval_progress), eval_episodes_mark = CASE WHEN ?4 IS NULL THEN eval_episodes_mark ELSE (SELECT MAX(id) FROM episodes WHERE job_id = ?1) END WHERE id = ?1 AND worker_id = ?2 AND lease_hash = ?3 AND state = 'running'")
             .bind(lease.job)
             .bind(lease.worker)
             .bind(lease.hash)
+            .bind(eval_progress)
             .execute(&self.pool)
             .await?;
         if done.rows_affected() == 0 {
@@ -600,6 +604,28 @@ impl Store {
             return Err(now.map_or(StoreError::NotFound, StoreError::Conflict));
         }
         Ok(())
+    }
+
+    /// A leased evaluation's progress to go on from (`None`: from the start). The episode
+    /// summaries stored after it (from a lease that was lost) are removed, as the new lease
+    /// sends them again.
+    pub async fn eval_resume(&self, job: i64) -> Result<Option<String>> {
+        let mut tx = self.write_tx().await?;
+        let (progress, mark): (Option<String>, Option<i64>) =
+            sqlx::query_as("SELECT eval_progress, eval_episodes_mark FROM jobs WHERE id = ?")
+                .bind(job)
+                .fetch_optional(&mut *tx)
+                .await?
+                .unwrap_or((None, None));
+        let stale = match (&progress, mark) {
+            (None, _) => sqlx::query("DELETE FROM episodes WHERE job_id = ?").bind(job),
+            (Some(_), mark) => sqlx::query("DELETE FROM episodes WHERE job_id = ? AND id > ?")
+                .bind(job)
+                .bind(mark.unwrap_or(0)),
+        };
+        stale.execute(&mut *tx).await?;
+        tx.commit().await?;
+        Ok(progress)
     }
 
     pub async fn finish(

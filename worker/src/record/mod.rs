@@ -155,6 +155,18 @@ impl Recorder {
         })
     }
 
+    /// Counts `n` episodes as begun, recording those due, without recording them: an
+    /// evaluation going on from another worker's progress (that worker recorded them).
+    pub fn skip_episodes(&mut self, n: u64) {
+        for _ in 0..n {
+            self.seen += 1;
+            let due = self.every > 0 && (self.seen - 1).is_multiple_of(self.every);
+            if self.target != Target::Off && due && self.recorded < self.max_episodes {
+                self.recorded += 1;
+            }
+        }
+    }
+
     /// Counts an episode starting; returns a stream when this one is to be recorded.
     pub fn begin_episode(&mut self, what: &str) -> Option<EpisodeStream> {
         self.seen += 1;

@@ -227,13 +227,15 @@ impl Client {
     }
 
     /// Gives the job back to the queue unfinished (this worker is stopping).
-    pub async fn release(&self, job: i64) -> anyhow::Result<()> {
+    /// Gives `job` back unfinished; an evaluation with where it stood (`eval_progress`).
+    pub async fn release(&self, job: i64, eval_progress: Option<String>) -> anyhow::Result<()> {
         self.inner
             .clone()
             .release(pb::ReleaseRequest {
                 worker_id: self.worker_id.clone(),
                 job_id: job,
                 lease_token: self.lease_token.clone(),
+                eval_progress_json: eval_progress.unwrap_or_default(),
             })
             .await?;
         Ok(())

@@ -19,7 +19,7 @@ use super::{Client, WorkerOptions};
 use crate::record::{Recorder, SharedRecorder, lock};
 use crm_run::Env;
 use crm_run::Trainer;
-use crm_run::eval::{EpisodeRecord, evaluate};
+use crm_run::eval::{EpisodeRecord, EvalProgress, evaluate_from};
 use crm_run::imitation;
 
 /// A scratch folder removed on drop.
@@ -40,6 +40,8 @@ struct Link {
     cancelled: Arc<AtomicBool>,
     /// The worker is stopping: end the job where it can be resumed and give it back.
     preempted: Arc<AtomicBool>,
+    /// An evaluation stopped midway: where it stood (JSON), given back with the job.
+    eval_progress: Arc<std::sync::Mutex<Option<String>>>,
 }
 
 impl Link {
@@ -129,7 +131,9 @@ pub async fn run_job(
         progress: tx,
         cancelled: cancelled.clone(),
         preempted: stopping.clone(),
+        eval_progress: Arc::default(),
     };
+    let eval_progress = link.eval_progress.clone();
     let dir = scratch.0.clone();
     let options = options.clone();
     let outcome = tokio::task::spawn_blocking(move || match job.kind.as_str() {
@@ -151,7 +155,11 @@ pub async fn run_job(
     match result {
         Some(value) => client.complete(id, &value).await,
         None if stopping.load(Ordering::Relaxed) && !cancelled.load(Ordering::Relaxed) => {
-            client.release(id).await?;
+            let progress = eval_progress
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .take();
+            client.release(id, progress).await?;
             tracing::info!(job = id, "stopping: the job is queued again");
             Ok(())
         }
@@ -338,11 +346,21 @@ fn eval(
     let mut last = Instant::now();
     let mut send_failed = None;
     let recorder = recorder_for(spec.record.as_ref(), job.job_id, false);
-    let report = evaluate(
+    // Given back midway before: go on from where it stood, the episodes done kept.
+    let mut from = match job.eval_progress_json.as_str() {
+        "" => EvalProgress::default(),
+        text => serde_json::from_str(text).context("the job's eval_progress_json")?,
+    };
+    let resumed_from = from.done;
+    if let Some(recorder) = &recorder {
+        lock(recorder).skip_episodes(resumed_from);
+    }
+    let report = evaluate_from(
         &path,
         &spec,
         &env,
         crate::record::for_runtime(&recorder),
+        &mut from,
         |done, total, record| {
             ship(link, job.job_id, recorder.as_ref());
             let mut sent = link.send(summary(record));
@@ -360,7 +378,20 @@ fn eval(
             !link.stopped()
         },
     );
-    if link.stopped() {
+    if link.cancelled.load(Ordering::Relaxed) {
+        return Ok(None);
+    }
+    if link.preempted() && report.is_err() {
+        // Stopping midway: where it stood, for whoever leases the job next (unless an
+        // episode's summary may not have reached the coordinator).
+        ship(link, job.job_id, recorder.as_ref());
+        if send_failed.is_none() {
+            let progress = serde_json::to_string(&from)?;
+            *link
+                .eval_progress
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(progress);
+        }
         return Ok(None);
     }
     if let Some(err) = send_failed {
@@ -369,6 +400,9 @@ fn eval(
     ship(link, job.job_id, recorder.as_ref());
     let mut value = serde_json::to_value(report?)?;
     value["checkpoint_id"] = serde_json::Value::from(job.checkpoint_id);
+    if resumed_from > 0 {
+        value["resumed_from_episodes"] = serde_json::Value::from(resumed_from);
+    }
     Ok(Some(value))
 }
 
