@@ -263,3 +263,78 @@ async fn a_stale_or_foreign_lease_is_refused() {
     store.close().await;
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// An evaluation given back with its progress keeps the episode summaries stored up to then;
+/// a lease lost after that (its worker killed) drops the summaries stored since, and an
+/// evaluation never given back starts again with none.
+#[tokio::test]
+async fn an_evaluations_progress_keeps_its_episodes_and_a_lost_lease_drops_the_rest() {
+    let dir = temp_dir("eval-progress");
+    let store = Store::open(&dir).await.expect("open");
+    let worker = store
+        .register_worker("w", 2, "test", "secret-w")
+        .await
+        .expect("worker")
+        .id;
+    let eval = store
+        .create_job(NewJob {
+            kind: "eval",
+            ..new_job("{}")
+        })
+        .await
+        .expect("job")
+        .id;
+    store.lease(&worker, "a", 60_000).await.expect("lease");
+    assert_eq!(store.eval_resume(eval).await.expect("resume"), None);
+    for k in 0..3 {
+        store
+            .add_episode(eval, &format!("{{\"k\": {k}}}"), 200)
+            .await
+            .expect("episode");
+    }
+    store
+        .release(Lease::new(&worker, eval, "a"), Some(r#"{"done": 3}"#))
+        .await
+        .expect("release");
+    store.lease(&worker, "b", 0).await.expect("lease");
+    assert_eq!(
+        store.eval_resume(eval).await.expect("resume").as_deref(),
+        Some(r#"{"done": 3}"#)
+    );
+    assert_eq!(store.episodes(eval).await.expect("episodes").len(), 3);
+    // The second lease stores two more, then is lost (a lease of 0 ms expires at once).
+    for k in 3..5 {
+        store
+            .add_episode(eval, &format!("{{\"k\": {k}}}"), 200)
+            .await
+            .expect("episode");
+    }
+    let again = store.lease(&worker, "c", 60_000).await.expect("lease");
+    assert_eq!(again.map(|j| j.id), Some(eval));
+    assert!(store.eval_resume(eval).await.expect("resume").is_some());
+    assert_eq!(
+        store.episodes(eval).await.expect("episodes").len(),
+        3,
+        "the lost lease's summaries are dropped"
+    );
+    // Another evaluation, never given back: a new lease starts it again with none.
+    let other = store
+        .create_job(NewJob {
+            kind: "eval",
+            ..new_job("{}")
+        })
+        .await
+        .expect("job")
+        .id;
+    store
+        .succeed(Lease::new(&worker, eval, "c"), "{}")
+        .await
+        .expect("succeed");
+    store.lease(&worker, "d", 0).await.expect("lease");
+    store.add_episode(other, "{}", 200).await.expect("episode");
+    store.lease(&worker, "e", 60_000).await.expect("lease");
+    assert_eq!(store.eval_resume(other).await.expect("resume"), None);
+    assert!(store.episodes(other).await.expect("episodes").is_empty());
+    store.close().await;
+    std::fs::remove_dir_all(&dir).ok();
+}
