@@ -225,7 +225,7 @@ pub struct Sac {
     alpha_opt: Optimizer,
     buffer: Replay,
     noise: Noise,
-    /// Masks of the machine's stages, to fill `next_mask`.
+    /// Masks of the machine's stages: a stored transition's masks follow from its stages.
     stage_masks: Vec<Vec<f32>>,
 }
 

@@ -2,12 +2,13 @@
 //! the grasping CRM, one iteration at a time so that a caller (the CLI's progress bar, the
 //! service worker's heartbeat) can report between them and save checkpoints. A checkpoint
 //! holds the run's whole training state until the run finishes (`crm_learn::state`;
-//! CRM-SAC's with its replay buffer, `crm_learn::replay`), and a run resumed from one is the same run: the same metrics and the same final weights, bit for
-//! bit, as if it had never stopped (on the same build and CPU type). From a checkpoint
-//! without that state (one written before, or a finished run's) a run keeps the steps already
-//! trained (so the learning-rate steps stay where they were) and reseeds its environments and
-//! noise from (seed, steps): reproducible, but not the uninterrupted run; a SAC run so
-//! resumed starts with an empty replay buffer.
+//! CRM-SAC's with its replay buffer, `crm_learn::replay`), and a run resumed from one is the
+//! same run: the same metrics and the same final weights, bit for bit, as if it had never
+//! stopped (on the same build and CPU type). From a checkpoint without that state (one
+//! written before, one a coordinator's size limit kept to the policy, or a finished run's) a
+//! run keeps the steps already trained (so the learning-rate steps stay where they were) and
+//! reseeds its environments and noise from (seed, steps): reproducible, but not the
+//! uninterrupted run; a SAC run so resumed starts with an empty replay buffer.
 
 use std::path::Path;
 use std::time::Instant;
