@@ -1,6 +1,7 @@
 //! `crm`: the command-line front of crm-grasp. Thin glue over the library crates.
 
 mod commands;
+mod mlflow;
 mod record;
 mod service;
 

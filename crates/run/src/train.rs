@@ -365,6 +365,11 @@ impl Trainer {
         Ok((sampled, means))
     }
 
+    /// The world's name and hash.
+    pub fn world(&self) -> (&str, &str) {
+        (&self.world.0, &self.world.1)
+    }
+
     /// Environment steps trained so far (a resumed run starts at the checkpoint's).
     pub fn steps(&self) -> u64 {
         self.done

@@ -4,6 +4,7 @@
 
 use std::io::Write;
 use std::path::PathBuf;
+use std::time::Duration;
 
 use anyhow::{Context, bail};
 use crm_learn::PpoConfig;
@@ -113,6 +114,25 @@ pub struct TrainArgs {
     /// has rested in the palm for this many seconds passes then; off without it.
     #[arg(long, value_name = "SECONDS", value_parser = parse_settle_s)]
     pub settle_s: Option<f64>,
+    /// Also log the run to this MLflow tracking server (`http://HOST:PORT`): parameters,
+    /// every metric by step, tags, the final checkpoint. A server that is down or refuses is
+    /// reported and retried; it never stops the training.
+    #[arg(long, value_name = "URI", env = "MLFLOW_TRACKING_URI")]
+    pub mlflow_uri: Option<String>,
+    /// The MLflow experiment (made when missing).
+    #[arg(
+        long,
+        value_name = "NAME",
+        env = "MLFLOW_EXPERIMENT_NAME",
+        default_value = "crm-grasp"
+    )]
+    pub mlflow_experiment: String,
+    /// The MLflow run's name (default: the --out folder's name).
+    #[arg(long, value_name = "NAME")]
+    pub mlflow_run_name: Option<String>,
+    /// Seconds a finished run waits for its last MLflow records to reach the server.
+    #[arg(long, value_name = "SECONDS", default_value_t = 30)]
+    pub mlflow_wait_s: u64,
 }
 
 /// `--settle-s`: seconds within [`crm_api::jobs::SETTLE_S_RANGE`].
@@ -180,6 +200,25 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         .open(&metrics_path)
         .with_context(|| format!("creating {}", metrics_path.display()))?;
     let mut events = tensorboard_events(&args.out, &metrics_path, &spec)?;
+    let mlflow = match &args.mlflow_uri {
+        Some(uri) => {
+            let target = crate::mlflow::Target {
+                uri: uri.clone(),
+                experiment: args.mlflow_experiment.clone(),
+                run_name: args.mlflow_run_name.clone().unwrap_or_else(|| {
+                    args.out
+                        .file_name()
+                        .map_or("crm-train".into(), |n| n.to_string_lossy().to_string())
+                }),
+            };
+            Some(crate::mlflow::Logger::training(
+                &target,
+                &spec,
+                trainer.world(),
+            )?)
+        }
+        None => None,
+    };
     let checkpoint = args
         .out
         .join(format!("{}.safetensors", spec.algorithm.name()));
@@ -201,11 +240,17 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 trainer.steps(),
                 checkpoint.display()
             );
+            if let Some(mlflow) = mlflow {
+                mlflow.finish("KILLED", Duration::from_secs(args.mlflow_wait_s));
+            }
             return Ok(());
         }
         let it = trainer.iterate()?;
         writeln!(metrics, "{}", serde_json::to_string(&it)?)?;
         events.iteration(&it)?;
+        if let Some(mlflow) = &mlflow {
+            mlflow.metrics(it.steps, &crm_api::tensorboard::scalars(&it));
+        }
         let mix: Vec<String> = it
             .stage_mix
             .iter()
@@ -262,6 +307,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         checkpoint.display(),
         metrics_path.display()
     );
+    if let Some(mlflow) = mlflow {
+        mlflow.checkpoint(&checkpoint)?;
+        if let Some(id) = mlflow.finish("FINISHED", Duration::from_secs(args.mlflow_wait_s)) {
+            eprintln!("logged to MLflow as run {id}");
+        }
+    }
     Ok(())
 }
 
