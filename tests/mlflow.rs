@@ -223,3 +223,84 @@ fn a_server_that_never_answers_never_fails_the_run() {
         String::from_utf8_lossy(&refused.stderr)
     );
 }
+
+/// `crm-server --mlflow-uri`: its workers log each training job as a run (found again by its
+/// tag on a new lease) and each evaluation of the job's checkpoint into that run.
+#[test]
+fn a_coordinators_jobs_and_their_evaluations_log_to_its_mlflow_server() {
+    let dir = TempDir::new("mlflow-service");
+    let port = free_port();
+    let uri = format!("http://127.0.0.1:{port}");
+    let server_dir = dir.0.join("mlflow");
+    std::fs::create_dir_all(&server_dir).expect("dir");
+    let _mlflow = start_mlflow(&server_dir, port);
+    let server = start_server(
+        &dir.0.join("data"),
+        &["--mlflow-uri", &uri, "--mlflow-experiment", "crm-jobs"],
+    );
+    let addr = server.http.clone();
+    let _worker = start_worker(&format!("http://{}", server.grpc), &[]);
+    let id = submit(
+        &addr,
+        r#"{"kind": "train", "algorithm": "crm-ppo", "task": "mouse-press", "steps": 2048, "seed": 3, "envs": 1, "config": {"rollout_steps": 512, "minibatch_size": 128}}"#,
+    )["id"]
+        .as_i64()
+        .expect("id");
+    let done = wait_state(&addr, id, "succeeded", 300);
+    let checkpoint = done["result"]["checkpoint_id"]
+        .as_i64()
+        .expect("checkpoint");
+    let eval = submit(
+        &addr,
+        &format!(
+            r#"{{"kind": "eval", "checkpoint_id": {checkpoint}, "episodes": 6, "tasks": ["mouse-press"]}}"#
+        ),
+    )["id"]
+        .as_i64()
+        .expect("id");
+    let evaluated = wait_state(&addr, eval, "succeeded", 300);
+
+    let download = dir.0.join("download");
+    std::fs::create_dir_all(&download).expect("dir");
+    let run = read_back(&uri, "crm-jobs", &download);
+    assert_eq!(run["status"], "FINISHED", "{run}");
+    assert_eq!(run["tags"]["mlflow.runName"], format!("job-{id}"));
+    assert!(
+        run["tags"]["crm.job"]
+            .as_str()
+            .is_some_and(|t| t.ends_with(&format!("/{id}"))),
+        "{run}"
+    );
+    assert_eq!(run["tags"]["crm.eval.sampled.job"], eval.to_string());
+    let stored: Vec<crm_api::Iteration> =
+        get(&addr, &format!("/api/v1/runs/{id}/metrics"))["metrics"]
+            .as_array()
+            .expect("metrics")
+            .iter()
+            .map(|m| serde_json::from_value(m["data"].clone()).expect("an iteration"))
+            .collect();
+    assert_eq!(stored.len(), 4);
+    for it in &stored {
+        for (key, value) in crm_api::tensorboard::scalars(it) {
+            let found = run["metrics"][&key]
+                .as_array()
+                .and_then(|s| s.iter().find(|p| p[0].as_u64() == Some(it.steps)))
+                .unwrap_or_else(|| panic!("{key} at step {}", it.steps));
+            assert_eq!(found[1].as_f64(), Some(value), "{key} at step {}", it.steps);
+        }
+    }
+    let success = &run["metrics"]["eval/sampled/success_rate"][0];
+    assert_eq!(success[0], 2048);
+    assert_eq!(success[1], evaluated["result"]["success_rate"]);
+    let file = http(
+        &addr,
+        "GET",
+        &format!("/api/v1/checkpoints/{checkpoint}/download"),
+        None,
+        None,
+    );
+    assert_eq!(
+        std::fs::read(download.join("checkpoint.safetensors")).expect("artifact"),
+        file.body
+    );
+}

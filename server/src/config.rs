@@ -112,6 +112,14 @@ pub struct ServerConfig {
     /// built-in world; workers need the same folders (`crm worker --worlds`).
     #[arg(long, value_name = "DIR")]
     pub worlds: Option<PathBuf>,
+    /// An MLflow tracking server (`http://HOST:PORT`) the workers log every training job to,
+    /// as a run with its parameters, metrics, tags and final checkpoint, and each evaluation
+    /// of its checkpoints into that run (the workers reach it, not the coordinator).
+    #[arg(long, value_name = "URI")]
+    pub mlflow_uri: Option<String>,
+    /// The MLflow experiment of those runs (made when missing).
+    #[arg(long, value_name = "NAME", default_value = "crm-grasp")]
+    pub mlflow_experiment: String,
     /// Workers started through a batch system (`launch` in a config file).
     #[command(flatten)]
     pub launch: crate::launcher::LaunchConfig,
@@ -153,6 +161,8 @@ impl std::fmt::Debug for ServerConfig {
             .field("models", &self.models)
             .field("max_sweep_jobs", &self.max_sweep_jobs)
             .field("worlds", &self.worlds)
+            .field("mlflow_uri", &self.mlflow_uri)
+            .field("mlflow_experiment", &self.mlflow_experiment)
             .field("launch", &self.launch)
             .finish()
     }
@@ -189,6 +199,8 @@ impl Default for ServerConfig {
             models: PathBuf::from("models"),
             max_sweep_jobs: 200,
             worlds: None,
+            mlflow_uri: None,
+            mlflow_experiment: "crm-grasp".into(),
             launch: crate::launcher::LaunchConfig::default(),
         }
     }
@@ -210,6 +222,16 @@ impl ServerConfig {
         crate::auth::Tokens::configured(self)?;
         if self.keep_checkpoints == 0 {
             anyhow::bail!("keep_checkpoints: must be at least 1 (a job resumes from its newest)");
+        }
+        if let Some(uri) = &self.mlflow_uri
+            && !(uri.starts_with("http://") || uri.starts_with("https://"))
+        {
+            anyhow::bail!(
+                "mlflow_uri: {uri:?} is not an http:// or https:// URL of a tracking server"
+            );
+        }
+        if self.mlflow_experiment.trim().is_empty() {
+            anyhow::bail!("mlflow_experiment: must not be empty");
         }
         if self.max_body_bytes == 0 || self.max_concurrent_requests == 0 {
             anyhow::bail!("max_body_bytes and max_concurrent_requests must be positive");

@@ -270,7 +270,7 @@ impl Launcher {
 }
 
 /// The first 8 hex digits of the SHA-256 of `bytes`.
-fn short_hash(bytes: &[u8]) -> String {
+pub fn short_hash(bytes: &[u8]) -> String {
     use sha2::{Digest, Sha256};
     Sha256::digest(bytes)
         .iter()

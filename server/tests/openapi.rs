@@ -43,6 +43,13 @@ fn the_binary_refuses_bad_settings_with_exit_code_2() {
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("lease_ttl_s"), "{stderr}");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_crm-server"))
+        .args(["--mlflow-uri", "localhost:5000"])
+        .output()
+        .expect("run crm-server");
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("mlflow_uri"), "{stderr}");
 }
 
 #[test]

@@ -162,11 +162,17 @@ impl Coordinator for CoordinatorService {
             .await
             .map_err(status)?;
         tracing::info!(worker = worker.id, name = worker.name, "worker registered");
+        let config = &self.state.config;
+        let canonical =
+            std::fs::canonicalize(&config.data_dir).unwrap_or_else(|_| config.data_dir.clone());
         Ok(Response::new(pb::RegisterReply {
             worker_id: worker.id,
-            heartbeat_interval_s: self.state.config.heartbeat_interval_s,
-            lease_ttl_s: self.state.config.lease_ttl_s,
+            heartbeat_interval_s: config.heartbeat_interval_s,
+            lease_ttl_s: config.lease_ttl_s,
             worker_secret: secret,
+            mlflow_uri: config.mlflow_uri.clone().unwrap_or_default(),
+            mlflow_experiment: config.mlflow_experiment.clone(),
+            coordinator_id: crate::launcher::short_hash(canonical.to_string_lossy().as_bytes()),
         }))
     }
 
@@ -191,6 +197,16 @@ impl Coordinator for CoordinatorService {
                 .map_err(status)?
                 .unwrap_or_default(),
             _ => String::new(),
+        };
+        // An evaluation's training job: the one that saved the checkpoint it evaluates.
+        let train_job_id = match (job.kind.as_str(), job.checkpoint_id) {
+            ("eval", Some(checkpoint)) => store
+                .checkpoint(checkpoint)
+                .await
+                .ok()
+                .and_then(|c| c.job_id)
+                .unwrap_or(0),
+            _ => 0,
         };
         let checkpoint_id = match job.kind.as_str() {
             "eval" => job.checkpoint_id.unwrap_or(0),
@@ -217,6 +233,7 @@ impl Coordinator for CoordinatorService {
                 attempt: u32::try_from(job.attempts - 1).unwrap_or(0),
                 lease_token: token,
                 eval_progress_json,
+                train_job_id,
             }),
         }))
     }

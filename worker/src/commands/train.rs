@@ -215,6 +215,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 &target,
                 &spec,
                 trainer.world(),
+                crate::mlflow::Find::Create,
             )?)
         }
         None => None,
@@ -241,7 +242,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 checkpoint.display()
             );
             if let Some(mlflow) = mlflow {
-                mlflow.finish("KILLED", Duration::from_secs(args.mlflow_wait_s));
+                mlflow.finish(Some("KILLED"), Duration::from_secs(args.mlflow_wait_s));
             }
             return Ok(());
         }
@@ -309,7 +310,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     );
     if let Some(mlflow) = mlflow {
         mlflow.checkpoint(&checkpoint)?;
-        if let Some(id) = mlflow.finish("FINISHED", Duration::from_secs(args.mlflow_wait_s)) {
+        if let Some(id) = mlflow.finish(Some("FINISHED"), Duration::from_secs(args.mlflow_wait_s)) {
             eprintln!("logged to MLflow as run {id}");
         }
     }

@@ -172,6 +172,36 @@ impl Client {
         })
     }
 
+    /// The run of `experiment_id` whose tag `key` is `value`, if there is one.
+    pub fn find_run(
+        &self,
+        experiment_id: &str,
+        key: &str,
+        value: &str,
+    ) -> anyhow::Result<Option<Run>> {
+        let found = self.post(
+            "runs/search",
+            &json!({
+                "experiment_ids": [experiment_id],
+                "filter": format!("tags.`{key}` = '{}'", value.replace('\'', "")),
+                "max_results": 1,
+            }),
+        )?;
+        Ok(found["runs"]
+            .as_array()
+            .and_then(|runs| runs.first())
+            .and_then(|run| {
+                let info = &run["info"];
+                Some(Run {
+                    run_id: info["run_id"].as_str()?.to_string(),
+                    artifact_uri: info["artifact_uri"]
+                        .as_str()
+                        .unwrap_or_default()
+                        .to_string(),
+                })
+            }))
+    }
+
     /// Logs parameters, metrics and tags in one request (within MLflow's limits per request).
     pub fn log_batch(
         &self,
@@ -221,12 +251,19 @@ impl Client {
         Ok(())
     }
 
-    /// Ends the run with `status` (`FINISHED`, `FAILED`, `KILLED`).
-    pub fn end_run(&self, run_id: &str, status: &str, end_ms: i64) -> anyhow::Result<()> {
-        self.post(
-            "runs/update",
-            &json!({ "run_id": run_id, "status": status, "end_time": end_ms }),
-        )?;
+    /// Sets the run's `status` (`RUNNING`, or at its end `FINISHED`, `FAILED`, `KILLED` with
+    /// `end_ms`).
+    pub fn set_status(
+        &self,
+        run_id: &str,
+        status: &str,
+        end_ms: Option<i64>,
+    ) -> anyhow::Result<()> {
+        let mut body = json!({ "run_id": run_id, "status": status });
+        if let Some(end) = end_ms {
+            body["end_time"] = json!(end);
+        }
+        self.post("runs/update", &body)?;
         Ok(())
     }
 }

@@ -42,9 +42,23 @@ pub struct Target {
     pub run_name: String,
 }
 
+/// How the logger finds its run.
+#[derive(Clone, Debug)]
+pub enum Find {
+    /// A new run.
+    Create,
+    /// The run with this tag (key, value), made with it when there is none: a coordinator's
+    /// job logs to one run across its leases.
+    OrCreate(String, String),
+    /// The run with this tag, or nothing is logged: an evaluation of a training job's
+    /// checkpoint goes into that job's run.
+    Existing(String, String),
+}
+
 enum Op {
     Start {
         tags: Vec<(String, String)>,
+        find: Find,
     },
     Batch {
         params: Vec<(String, String)>,
@@ -56,7 +70,7 @@ enum Op {
         bytes: Vec<u8>,
     },
     End {
-        status: String,
+        status: Option<String>,
     },
 }
 
@@ -116,6 +130,7 @@ impl Logger {
         target: &Target,
         spec: &crm_api::TrainSpec,
         world: (&str, &str),
+        find: Find,
     ) -> anyhow::Result<Self> {
         let document = serde_json::to_value(spec)?;
         let mut params = Vec::new();
@@ -133,7 +148,7 @@ impl Logger {
                 env!("CARGO_PKG_VERSION").to_string(),
             ),
         ];
-        let logger = Self::start(target, params, tags)?;
+        let logger = Self::start(target, find, params, tags)?;
         logger.artifact("job.json", serde_json::to_vec_pretty(&document)?);
         Ok(logger)
     }
@@ -162,6 +177,7 @@ impl Logger {
     /// the server answers. Errors only for a URI that is no URL.
     pub fn start(
         target: &Target,
+        find: Find,
         params: Vec<(String, String)>,
         tags: Vec<(String, String)>,
     ) -> anyhow::Result<Self> {
@@ -184,7 +200,7 @@ impl Logger {
             .map(|(k, v)| (k, cut(&v, MAX_TAG_CHARS)))
             .chain([("mlflow.runName".to_string(), target.run_name.clone())])
             .collect();
-        tx.send(Op::Start { tags }).ok();
+        tx.send(Op::Start { tags, find }).ok();
         for chunk in params.chunks(MAX_PARAMS) {
             tx.send(Op::Batch {
                 params: chunk.to_vec(),
@@ -263,12 +279,13 @@ impl Logger {
             .clone()
     }
 
-    /// Ends the run with `status` (`FINISHED`, `KILLED`, `FAILED`) and waits at most `wait`
-    /// for the queue to reach the server; reports what did not. Returns the run's id.
-    pub fn finish(mut self, status: &str, wait: Duration) -> Option<String> {
+    /// Ends the run with `status` (`FINISHED`, `KILLED`, `FAILED`; `None` leaves it as it is,
+    /// for an evaluation logged into a training run) and waits at most `wait` for the queue to
+    /// reach the server; reports what did not. Returns the run's id.
+    pub fn finish(mut self, status: Option<&str>, wait: Duration) -> Option<String> {
         self.tx
             .send(Op::End {
-                status: status.to_string(),
+                status: status.map(str::to_string),
             })
             .ok();
         let thread = self.thread.take();
@@ -299,7 +316,7 @@ impl Drop for Logger {
         if self.thread.take().is_some() {
             self.tx
                 .send(Op::End {
-                    status: "FAILED".into(),
+                    status: Some("FAILED".into()),
                 })
                 .ok();
         }
@@ -337,14 +354,30 @@ fn work(
         }
         let Some(op) = queue.front() else { continue };
         let sent = match (op, &run) {
-            (Op::Start { tags }, _) => client.experiment(&target.experiment).and_then(|id| {
-                let made = client.create_run(&id, &target.run_name, now_ms(), tags)?;
-                *run_id
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(made.run_id.clone());
-                run = Some(made);
-                Ok(())
-            }),
+            (Op::Start { tags, find }, _) => {
+                match start(&client, &target.experiment, &target.run_name, tags, find) {
+                    Ok(Some(found)) => {
+                        *run_id
+                            .lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner) =
+                            Some(found.run_id.clone());
+                        run = Some(found);
+                        Ok(())
+                    }
+                    Ok(None) => {
+                        if let Find::Existing(key, value) = find {
+                            eprintln!(
+                                "mlflow: no run in experiment {:?} of {} has {key} = {value}; \
+                                 nothing is logged",
+                                target.experiment,
+                                client.base()
+                            );
+                        }
+                        return;
+                    }
+                    Err(err) => Err(err),
+                }
+            }
             (_, None) => Err(anyhow::anyhow!("the run was not made")),
             (
                 Op::Batch {
@@ -364,7 +397,13 @@ fn work(
                     other => other,
                 }
             }
-            (Op::End { status }, Some(run)) => client.end_run(&run.run_id, status, now_ms()),
+            (Op::End { status: None }, Some(_)) => Ok(()),
+            (
+                Op::End {
+                    status: Some(status),
+                },
+                Some(run),
+            ) => client.set_status(&run.run_id, status, Some(now_ms())),
         };
         match sent {
             Ok(()) => {
@@ -402,6 +441,45 @@ fn work(
             }
         }
     }
+}
+
+/// The run a logger writes to: found by its tag, or made (`None`: an [`Find::Existing`] run
+/// that is not there).
+fn start(
+    client: &Client,
+    experiment: &str,
+    name: &str,
+    tags: &[(String, String)],
+    find: &Find,
+) -> anyhow::Result<Option<Run>> {
+    let experiment_id = client.experiment(experiment)?;
+    let (tag, create) = match find {
+        Find::Create => (None, true),
+        Find::OrCreate(key, value) => (Some((key, value)), true),
+        Find::Existing(key, value) => (Some((key, value)), false),
+    };
+    if let Some((key, value)) = tag {
+        if let Some(found) = client.find_run(&experiment_id, key, value)? {
+            if create {
+                // A job leased again: its run goes on.
+                client.set_status(&found.run_id, "RUNNING", None)?;
+            }
+            return Ok(Some(found));
+        }
+        if !create {
+            return Ok(None);
+        }
+    }
+    let mut tags = tags.to_vec();
+    if let Some((key, value)) = tag {
+        tags.push((key.clone(), value.clone()));
+    }
+    Ok(Some(client.create_run(
+        &experiment_id,
+        name,
+        now_ms(),
+        &tags,
+    )?))
 }
 
 #[cfg(test)]

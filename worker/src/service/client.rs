@@ -38,6 +38,33 @@ pub struct Client {
     /// The secret of the job this client acts for (`Job.lease_token`; empty between jobs).
     pub lease_token: String,
     pub heartbeat: Duration,
+    /// The coordinator's MLflow tracking server, when it names one.
+    pub mlflow: Option<MlflowSetting>,
+}
+
+/// The coordinator's MLflow setting, from its answer to `Register`.
+#[derive(Clone, Debug)]
+pub struct MlflowSetting {
+    pub uri: String,
+    pub experiment: String,
+    /// This coordinator among others logging to the experiment.
+    pub coordinator_id: String,
+}
+
+impl MlflowSetting {
+    /// Where job `job`'s run logs.
+    pub fn target(&self, job: i64) -> crate::mlflow::Target {
+        crate::mlflow::Target {
+            uri: self.uri.clone(),
+            experiment: self.experiment.clone(),
+            run_name: format!("job-{job}"),
+        }
+    }
+
+    /// The tag that finds job `job`'s run: `crm.job` = `COORDINATOR/JOB`.
+    pub fn job_tag(&self, job: i64) -> (String, String) {
+        ("crm.job".into(), format!("{}/{job}", self.coordinator_id))
+    }
 }
 
 /// tonic's TLS settings for a coordinator or a policy server: `ca` (a PEM file) as the only
@@ -96,6 +123,7 @@ impl Client {
             worker_secret: String::new(),
             lease_token: String::new(),
             heartbeat: Duration::from_secs(5),
+            mlflow: None,
         })
     }
 

@@ -96,6 +96,11 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
         client.worker_id = registration.worker_id;
         client.worker_secret = registration.worker_secret;
         client.heartbeat = Duration::from_secs(u64::from(registration.heartbeat_interval_s.max(1)));
+        client.mlflow = (!registration.mlflow_uri.is_empty()).then_some(client::MlflowSetting {
+            uri: registration.mlflow_uri,
+            experiment: registration.mlflow_experiment,
+            coordinator_id: registration.coordinator_id,
+        });
         loop {
             if stop.load(Ordering::Relaxed) {
                 return Ok(());

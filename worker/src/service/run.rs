@@ -253,6 +253,18 @@ fn train(
         }
     }
     let path = dir.join("checkpoint.safetensors");
+    // The coordinator's MLflow server: one run per job, found again by its tag on a new lease.
+    let mlflow = link.client.mlflow.as_ref().and_then(|m| {
+        let (key, value) = m.job_tag(job.job_id);
+        crate::mlflow::Logger::training(
+            &m.target(job.job_id),
+            &spec,
+            trainer.world(),
+            crate::mlflow::Find::OrCreate(key, value),
+        )
+        .map_err(|err| tracing::warn!(err = %format!("{err:#}"), "mlflow: not logging"))
+        .ok()
+    });
     let every = Duration::from_secs(options.checkpoint_every_s.max(1));
     let mut last_upload = Instant::now();
     // (steps, id) of the newest upload, so the final one is not sent twice.
@@ -303,10 +315,16 @@ fn train(
                 // Stopping: the run's state so far, for whoever leases the job next.
                 upload(&trainer)?;
             }
+            if let Some(mlflow) = mlflow {
+                mlflow.finish(Some("KILLED"), MLFLOW_WAIT);
+            }
             return Ok(None);
         }
         let it = trainer.iterate()?;
         let sent = link.send(progress::Body::IterationJson(serde_json::to_string(&it)?));
+        if let Some(mlflow) = &mlflow {
+            mlflow.metrics(it.steps, &crm_api::tensorboard::scalars(&it));
+        }
         if sent.is_err() && link.stopped() {
             return Ok(None);
         }
@@ -322,6 +340,12 @@ fn train(
     }
     let checkpoint_id = upload(&trainer)?;
     ship(link, job.job_id, recorder.as_ref());
+    if let Some(mlflow) = mlflow {
+        if let Err(err) = mlflow.checkpoint(&path) {
+            tracing::warn!(err = %format!("{err:#}"), "mlflow: the checkpoint is not logged");
+        }
+        mlflow.finish(Some("FINISHED"), MLFLOW_WAIT);
+    }
     Ok(Some(serde_json::json!({
         "steps": trainer.steps(),
         "stopped_early": trainer.stopped_early(),
@@ -398,7 +422,35 @@ fn eval(
         return Err(err);
     }
     ship(link, job.job_id, recorder.as_ref());
-    let mut value = serde_json::to_value(report?)?;
+    let report = report?;
+    // Into the MLflow run of the training job that made the checkpoint.
+    if let Some(m) = &link.client.mlflow
+        && job.train_job_id != 0
+    {
+        let (key, value) = m.job_tag(job.train_job_id);
+        match crate::mlflow::Logger::start(
+            &m.target(job.train_job_id),
+            crate::mlflow::Find::Existing(key, value),
+            Vec::new(),
+            Vec::new(),
+        ) {
+            Ok(mlflow) => {
+                mlflow.metrics(report.trained_steps, &eval_scalars(&report));
+                let kind = if report.deterministic {
+                    "deterministic"
+                } else {
+                    "sampled"
+                };
+                mlflow.tags(vec![(
+                    format!("crm.eval.{kind}.job"),
+                    job.job_id.to_string(),
+                )]);
+                mlflow.finish(None, MLFLOW_WAIT);
+            }
+            Err(err) => tracing::warn!(err = %format!("{err:#}"), "mlflow: not logging"),
+        }
+    }
+    let mut value = serde_json::to_value(report)?;
     value["checkpoint_id"] = serde_json::Value::from(job.checkpoint_id);
     if resumed_from > 0 {
         value["resumed_from_episodes"] = serde_json::Value::from(resumed_from);
@@ -505,4 +557,32 @@ fn too_large(error: &anyhow::Error) -> Option<String> {
         .downcast_ref::<tonic::Status>()
         .filter(|status| status.code() == tonic::Code::ResourceExhausted)
         .map(|status| status.message().to_string())
+}
+
+/// How long a job's end waits for its MLflow records to reach the server.
+const MLFLOW_WAIT: Duration = Duration::from_secs(10);
+
+/// An evaluation's figures as MLflow metrics: `eval/sampled/...` or `eval/deterministic/...`,
+/// overall and per objective.
+fn eval_scalars(report: &crm_api::EvalReport) -> Vec<(String, f64)> {
+    let kind = if report.deterministic {
+        "deterministic"
+    } else {
+        "sampled"
+    };
+    let mut out = vec![
+        (format!("eval/{kind}/success_rate"), report.success_rate),
+        (
+            format!("eval/{kind}/mean_episode_length"),
+            report.mean_episode_length,
+        ),
+        (format!("eval/{kind}/episodes"), report.episodes as f64),
+    ];
+    for (objective, row) in &report.per_objective {
+        out.push((
+            format!("eval/{kind}/{objective}/success_rate"),
+            row.success_rate,
+        ));
+    }
+    out
 }
