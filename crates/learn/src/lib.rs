@@ -18,6 +18,7 @@ pub mod lineage;
 pub mod network;
 pub mod noise;
 pub mod normalize;
+pub mod onnx;
 pub mod optim;
 pub mod ppo;
 pub mod replay;

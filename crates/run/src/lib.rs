@@ -14,6 +14,7 @@ pub mod demos;
 pub mod env;
 pub mod error;
 pub mod eval;
+pub mod export;
 pub mod imitation;
 pub mod record;
 pub mod topology;
