@@ -2,7 +2,7 @@
 //! package's EventAccumulator, `scripts/tensorboard-scalars.py`, in the venv scripts/test
 //! makes): `crm train` writes one beside `metrics.jsonl`, the coordinator serves one per
 //! training job, and each holds every series of every iteration with the logged values and the
-//! run's settings as text.
+//! run's settings as text and as TensorBoard hyperparameters.
 
 mod support;
 
@@ -63,6 +63,12 @@ fn check(read: &Value, iterations: &[crm_api::Iteration]) {
         settings.contains("\"algorithm\": \"crm-ppo\""),
         "{settings}"
     );
+    // The settings as hyperparameters, typed, under dotted keys.
+    let hparams = &read["hparams"];
+    assert_eq!(hparams["algorithm"], "crm-ppo", "{hparams}");
+    assert_eq!(hparams["config.rollout_steps"], 512.0, "{hparams}");
+    assert_eq!(hparams["steps"], 2048.0, "{hparams}");
+    assert_eq!(hparams["config.norm_obs"], true, "{hparams}");
 }
 
 #[test]

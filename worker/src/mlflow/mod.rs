@@ -102,25 +102,18 @@ fn cut(value: &str, max: usize) -> String {
 }
 
 /// A JSON document as MLflow parameters: one per leaf, keys joined by dots
-/// (`config.learning_rate`), values as JSON text (strings bare).
-pub fn flatten(prefix: &str, value: &serde_json::Value, out: &mut Vec<(String, String)>) {
-    let key = |k: &str| {
-        if prefix.is_empty() {
-            k.to_string()
-        } else {
-            format!("{prefix}.{k}")
-        }
-    };
-    match value {
-        serde_json::Value::Object(map) => {
-            for (k, v) in map {
-                flatten(&key(k), v, out);
-            }
-        }
-        serde_json::Value::Null => {}
-        serde_json::Value::String(s) => out.push((prefix.to_string(), cut(s, MAX_PARAM_CHARS))),
-        other => out.push((prefix.to_string(), cut(&other.to_string(), MAX_PARAM_CHARS))),
-    }
+/// (`config.learning_rate`, as TensorBoard's hparams), values as JSON text (strings bare).
+pub fn flatten(document: &serde_json::Value) -> Vec<(String, String)> {
+    crm_api::tensorboard::hparams::flatten(document)
+        .into_iter()
+        .map(|(key, value)| {
+            let text = match value {
+                serde_json::Value::String(s) => s,
+                other => other.to_string(),
+            };
+            (key, cut(&text, MAX_PARAM_CHARS))
+        })
+        .collect()
 }
 
 impl Logger {
@@ -133,8 +126,7 @@ impl Logger {
         find: Find,
     ) -> anyhow::Result<Self> {
         let document = serde_json::to_value(spec)?;
-        let mut params = Vec::new();
-        flatten("", &document, &mut params);
+        let params = flatten(&document);
         let tags = vec![
             (
                 "crm.algorithm".to_string(),
@@ -488,12 +480,9 @@ mod tests {
 
     #[test]
     fn a_document_flattens_to_dotted_parameters() {
-        let mut out = Vec::new();
         let long = "x".repeat(MAX_PARAM_CHARS + 10);
-        flatten(
-            "",
+        let mut out = flatten(
             &serde_json::json!({"algorithm": "crm-ppo", "config": {"gamma": 0.99, "hidden": [256, 256]}, "none": null, "long": long}),
-            &mut out,
         );
         out.sort();
         assert_eq!(out[0], ("algorithm".into(), "crm-ppo".into()));

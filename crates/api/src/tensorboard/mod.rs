@@ -1,11 +1,14 @@
 //! TensorBoard event files of a training run, so that it sits beside a lab's other runs
 //! (`tensorboard --logdir runs`, W&B's `sync_tensorboard`): every series of an iteration as a
-//! scalar by environment step, and the run's settings as text. The format is TensorFlow's
+//! scalar by environment step, and the run's settings as text and as hyperparameters
+//! ([`hparams`]). The format is TensorFlow's
 //! `Event` protocol buffer (`tensorflow/core/util/event.proto`, the messages below, encoded with
 //! prost) in TFRecord framing: each record is its length (u64, little-endian), the masked
 //! CRC32C of the length, the data and the masked CRC32C of the data. No crate for it is kept up
 //! (`tensorboard-rs` last released in 2020, `tfrecord` generates its messages with `protoc`), so
 //! the framing is written here, with the `crc` crate's CRC-32C (Castagnoli, `CRC_32_ISCSI`).
+
+pub mod hparams;
 
 use std::io::Write;
 
@@ -195,11 +198,12 @@ pub fn iteration(it: &Iteration, wall_time: f64) -> Vec<u8> {
 }
 
 /// A whole event file: the header, the run's settings as text (`settings`, JSON shown as a
-/// code block) and every iteration; `start` is the run's start (Unix seconds), each iteration
+/// code block) and as hyperparameters (`hparams`), and every iteration; `start` is the run's start (Unix seconds), each iteration
 /// stamped `start + wall_s`.
 pub fn file(settings: &serde_json::Value, iterations: &[Iteration], start: f64) -> Vec<u8> {
     let mut out = header(start);
     out.extend(settings_text(settings, start));
+    out.extend(hparams::session_start(settings, start));
     for it in iterations {
         out.extend(iteration(it, start + it.wall_s));
     }
@@ -223,6 +227,7 @@ impl<W: Write> Writer<W> {
     pub fn new(mut out: W, settings: &serde_json::Value, start: f64) -> std::io::Result<Self> {
         out.write_all(&header(start))?;
         out.write_all(&settings_text(settings, start))?;
+        out.write_all(&hparams::session_start(settings, start))?;
         out.flush()?;
         Ok(Self { out, start })
     }
