@@ -3,7 +3,8 @@
 //! MLflow's own client (`scripts/mlflow-run.py`): `crm train --mlflow-uri` logs the job's
 //! settings as parameters, every series of every iteration by step, its tags and the final
 //! checkpoint. The server is started only after the run has found it down: training goes on,
-//! and what waited in the queue reaches the server once it answers.
+//! and what waited in the queue reaches the server once it answers. A resumed run goes on in
+//! the same MLflow run.
 
 mod support;
 
@@ -180,6 +181,36 @@ fn a_training_run_logs_to_mlflow_even_when_the_server_comes_up_late() {
         serde_json::from_slice(&std::fs::read(download.join("job.json")).expect("job.json"))
             .expect("json");
     assert_eq!(job["steps"], 2048);
+
+    // Resumed to more steps, the run goes on in the same MLflow run (its --out folder's).
+    let resumed = Command::new(crm())
+        .args(["train", "--algo", "crm-ppo", "--task", "mouse-press"])
+        .args(["--steps", "3072", "--envs", "1", "--seed", "7", "--config"])
+        .arg(&config)
+        .arg("--out")
+        .arg(&out)
+        .arg("--resume")
+        .arg(out.join("crm-ppo.safetensors"))
+        .args(["--mlflow-uri", &uri, "--mlflow-experiment", "crm-test"])
+        .output()
+        .expect("crm train --resume");
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let again = dir.0.join("download-again");
+    std::fs::create_dir_all(&again).expect("dir");
+    let run_again = read_back(&uri, "crm-test", &again);
+    assert_eq!(run_again["run_id"], run["run_id"], "one run");
+    assert_eq!(run_again["status"], "FINISHED");
+    let steps: Vec<u64> = run_again["metrics"]["train/episodes"]
+        .as_array()
+        .expect("series")
+        .iter()
+        .filter_map(|p| p[0].as_u64())
+        .collect();
+    assert_eq!(steps, [512, 1024, 1536, 2048, 2560, 3072]);
 }
 
 #[test]

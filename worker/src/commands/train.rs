@@ -211,11 +211,21 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                         .map_or("crm-train".into(), |n| n.to_string_lossy().to_string())
                 }),
             };
+            // A resumed run goes on in the MLflow run of its --out folder (the newest there).
+            let out = std::fs::canonicalize(&args.out)
+                .unwrap_or_else(|_| args.out.clone())
+                .display()
+                .to_string();
+            let find = if args.resume.is_some() {
+                crate::mlflow::Find::OrCreate("crm.out".into(), out)
+            } else {
+                crate::mlflow::Find::Tagged("crm.out".into(), out)
+            };
             Some(crate::mlflow::Logger::training(
                 &target,
                 &spec,
                 trainer.world(),
-                crate::mlflow::Find::Create,
+                find,
             )?)
         }
         None => None,

@@ -19,6 +19,19 @@ pub struct Metric {
     pub timestamp: i64,
 }
 
+/// A request the server refused for what it asked (HTTP 4xx but 408 and 429): sending it
+/// again will not change the answer.
+#[derive(Debug)]
+pub struct Refused(pub String);
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Refused {}
+
 /// A tracking server at `base` (`http://HOST:PORT`).
 pub struct Client {
     base: String,
@@ -82,11 +95,15 @@ impl Client {
             serde_json::from_str(&text).unwrap_or_else(|_| json!({ "message": text }))
         };
         if status >= 400 {
-            bail!(
+            let message = format!(
                 "{method} {path}: {status} {} {}",
                 value["error_code"].as_str().unwrap_or(""),
                 value["message"].as_str().unwrap_or(&text)
             );
+            if (400..500).contains(&status) && status != 408 && status != 429 {
+                return Err(Refused(message).into());
+            }
+            bail!(message);
         }
         Ok(value)
     }
@@ -172,7 +189,7 @@ impl Client {
         })
     }
 
-    /// The run of `experiment_id` whose tag `key` is `value`, if there is one.
+    /// The newest run of `experiment_id` whose tag `key` is `value`, if there is one.
     pub fn find_run(
         &self,
         experiment_id: &str,
@@ -185,6 +202,7 @@ impl Client {
                 "experiment_ids": [experiment_id],
                 "filter": format!("tags.`{key}` = '{}'", value.replace('\'', "")),
                 "max_results": 1,
+                "order_by": ["attributes.start_time DESC"],
             }),
         )?;
         Ok(found["runs"]

@@ -20,7 +20,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 pub use client::{Client, Metric};
-use client::{MAX_METRICS, MAX_PARAMS, MAX_TAGS, Run};
+use client::{MAX_METRICS, MAX_PARAMS, MAX_TAGS, Refused, Run};
 
 /// Longest parameter value MLflow 2.x and 3.x store (`MAX_PARAM_VAL_LENGTH`).
 const MAX_PARAM_CHARS: usize = 6000;
@@ -29,6 +29,8 @@ const MAX_TAG_CHARS: usize = 8000;
 /// Seconds one request may take before it counts as failed.
 const REQUEST_TIMEOUT: Duration = Duration::from_secs(10);
 const FIRST_PAUSE: Duration = Duration::from_millis(500);
+/// Tries of a request the server refuses (HTTP 4xx) before it is dropped, said so.
+const REFUSED_TRIES: u32 = 3;
 const LONGEST_PAUSE: Duration = Duration::from_secs(30);
 
 /// Where a run logs.
@@ -45,8 +47,8 @@ pub struct Target {
 /// How the logger finds its run.
 #[derive(Clone, Debug)]
 pub enum Find {
-    /// A new run.
-    Create,
+    /// A new run with this tag (key, value), for a later [`Find::OrCreate`] to find.
+    Tagged(String, String),
     /// The run with this tag (key, value), made with it when there is none: a coordinator's
     /// job logs to one run across its leases.
     OrCreate(String, String),
@@ -325,6 +327,10 @@ fn work(
 ) {
     let mut queue: VecDeque<Op> = VecDeque::new();
     let mut run: Option<Run> = None;
+    // Whether this logger made its run (a run found again keeps the parameters it has:
+    // MLflow's parameters cannot change).
+    let mut created = false;
+    let mut refusals = 0;
     let mut pause = FIRST_PAUSE;
     let mut failing: Option<String> = None;
     let mut closed = false;
@@ -348,7 +354,8 @@ fn work(
         let sent = match (op, &run) {
             (Op::Start { tags, find }, _) => {
                 match start(&client, &target.experiment, &target.run_name, tags, find) {
-                    Ok(Some(found)) => {
+                    Ok(Some((found, made))) => {
+                        created = made;
                         *run_id
                             .lock()
                             .unwrap_or_else(std::sync::PoisonError::into_inner) =
@@ -378,7 +385,14 @@ fn work(
                     tags,
                 },
                 Some(run),
-            ) => client.log_batch(&run.run_id, params, metrics, tags),
+            ) => {
+                let params: &[(String, String)] = if created { params } else { &[] };
+                if params.is_empty() && metrics.is_empty() && tags.is_empty() {
+                    Ok(())
+                } else {
+                    client.log_batch(&run.run_id, params, metrics, tags)
+                }
+            }
             (Op::Artifact { name, bytes }, Some(run)) => {
                 match client.upload_artifact(run, name, bytes) {
                     // A server without the artifact proxy never takes one: said, not retried.
@@ -397,8 +411,26 @@ fn work(
                 Some(run),
             ) => client.set_status(&run.run_id, status, Some(now_ms())),
         };
+        let sent = match sent {
+            // Refused again and again: dropped, so the rest of the queue goes on.
+            Err(err) if err.downcast_ref::<Refused>().is_some() => {
+                refusals += 1;
+                if refusals >= REFUSED_TRIES {
+                    if matches!(queue.front(), Some(Op::Start { .. })) {
+                        eprintln!("mlflow: {err:#}; no run to log to, nothing is logged");
+                        return;
+                    }
+                    eprintln!("mlflow: {err:#}; refused {refusals} times, dropped");
+                    Ok(())
+                } else {
+                    Err(err)
+                }
+            }
+            other => other,
+        };
         match sent {
             Ok(()) => {
+                refusals = 0;
                 let ended = matches!(queue.pop_front(), Some(Op::End { .. }));
                 if failing.take().is_some() {
                     eprintln!("mlflow: {} answers again; logging goes on", client.base());
@@ -435,28 +467,28 @@ fn work(
     }
 }
 
-/// The run a logger writes to: found by its tag, or made (`None`: an [`Find::Existing`] run
-/// that is not there).
+/// The run a logger writes to and whether it was made now: found by its tag, or made
+/// (`None`: an [`Find::Existing`] run that is not there).
 fn start(
     client: &Client,
     experiment: &str,
     name: &str,
     tags: &[(String, String)],
     find: &Find,
-) -> anyhow::Result<Option<Run>> {
+) -> anyhow::Result<Option<(Run, bool)>> {
     let experiment_id = client.experiment(experiment)?;
-    let (tag, create) = match find {
-        Find::Create => (None, true),
-        Find::OrCreate(key, value) => (Some((key, value)), true),
-        Find::Existing(key, value) => (Some((key, value)), false),
+    let (tag, search, create) = match find {
+        Find::Tagged(key, value) => (Some((key, value)), false, true),
+        Find::OrCreate(key, value) => (Some((key, value)), true, true),
+        Find::Existing(key, value) => (Some((key, value)), true, false),
     };
-    if let Some((key, value)) = tag {
+    if let Some((key, value)) = tag.filter(|_| search) {
         if let Some(found) = client.find_run(&experiment_id, key, value)? {
             if create {
                 // A job leased again: its run goes on.
                 client.set_status(&found.run_id, "RUNNING", None)?;
             }
-            return Ok(Some(found));
+            return Ok(Some((found, false)));
         }
         if !create {
             return Ok(None);
@@ -466,12 +498,8 @@ fn start(
     if let Some((key, value)) = tag {
         tags.push((key.clone(), value.clone()));
     }
-    Ok(Some(client.create_run(
-        &experiment_id,
-        name,
-        now_ms(),
-        &tags,
-    )?))
+    let made = client.create_run(&experiment_id, name, now_ms(), &tags)?;
+    Ok(Some((made, true)))
 }
 
 #[cfg(test)]
