@@ -32,11 +32,28 @@ fn free_port() -> u16 {
         .port()
 }
 
+/// A running `mlflow server`: its own process group (uvicorn, the job runner and its
+/// consumers are children of the command), all of it killed when dropped.
+struct MlflowServer(std::process::Child);
+
+impl Drop for MlflowServer {
+    fn drop(&mut self) {
+        let group = format!("-{}", self.0.id());
+        Command::new("kill")
+            .args(["-KILL", "--", &group])
+            .status()
+            .ok();
+        self.0.wait().ok();
+    }
+}
+
 /// `mlflow server` on `port` with its store and artifacts under `dir`.
-fn start_mlflow(dir: &Path, port: u16) -> Proc {
+fn start_mlflow(dir: &Path, port: u16) -> MlflowServer {
+    use std::os::unix::process::CommandExt;
     let store = format!("sqlite:///{}", dir.join("mlflow.db").display());
-    let proc = Proc(
+    let proc = MlflowServer(
         Command::new(python())
+            .process_group(0)
             .args(["-m", "mlflow", "server", "--backend-store-uri", &store])
             .arg("--artifacts-destination")
             .arg(dir.join("artifacts"))
