@@ -584,10 +584,9 @@ impl Store {
     }
 
     /// Gives a running job back to the queue at once (its worker was preempted or is
-    /// stopping); the next lease resumes it from its newest checkpoint.
-    /// Gives a job back to the queue; an evaluation with where it stood (`eval_progress`,
-    /// the worker's JSON), which the next lease goes on from, keeping the episode summaries
-    /// stored so far.
+    /// stopping): the next lease resumes a training job from its newest checkpoint, and an
+    /// evaluation from `eval_progress` (the worker's JSON of where it stood), keeping the
+    /// episode summaries stored so far.
     pub async fn release(&self, lease: Lease<'_>, eval_progress: Option<&str>) -> Result<()> {
         let done = sqlx::query("UPDATE jobs SET state = 'queued', worker_id = NULL, lease_expires_at = NULL, phase = NULL, eval_progress = COALESCE(?4, eval_progress), eval_episodes_mark = CASE WHEN ?4 IS NULL THEN eval_episodes_mark ELSE (SELECT MAX(id) FROM episodes WHERE job_id = ?1) END WHERE id = ?1 AND worker_id = ?2 AND lease_hash = ?3 AND state = 'running'")
             .bind(lease.job)

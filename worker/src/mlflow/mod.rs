@@ -1,14 +1,16 @@
-//! Logging a training run to a user's MLflow tracking server (`crm train --mlflow-uri`, a
-//! training job's `mlflow`), so that crm-grasp runs sit beside a lab's others: the run's
-//! settings as parameters, every series TensorBoard gets as metrics by environment step, tags
-//! for the algorithm, the world and its hash, the seed and the lineage, and the final
-//! checkpoint and the job's document as artifacts.
+//! Logging a training run to a user's MLflow tracking server (`crm train --mlflow-uri`, and
+//! every training job of a coordinator started with `crm-server --mlflow-uri`), so that
+//! crm-grasp runs sit beside a lab's others: the run's settings as parameters, every series
+//! TensorBoard gets as metrics by environment step, tags for the algorithm, the world and its
+//! hash, the seed and the lineage, and the final checkpoint and the job's document as
+//! artifacts; an evaluation of a job's checkpoint goes into the job's run.
 //!
 //! Every call runs on a thread of its own behind a queue, so a server that is down, slow or
 //! refusing never fails or slows the training: a failure is reported once on standard error
-//! and retried with a growing pause (0.5 s to 30 s) for as long as the run lasts; when the
-//! server answers again the queue drains in order. At the end [`Logger::finish`] waits a
-//! bounded time for the queue and reports what did not reach the server.
+//! and retried with a growing pause (0.5 s to 30 s) for as long as the run lasts (a request
+//! the server refuses, HTTP 4xx, three times, then dropped); when the server answers again the
+//! queue drains in order. At the end [`Logger::finish`] waits a bounded time for the queue
+//! and reports what did not reach the server.
 
 mod client;
 
