@@ -157,7 +157,8 @@ pub async fn run_worker(options: WorkerOptions, stop: Arc<AtomicBool>) -> anyhow
 
 /// `crm worker`'s entry: runs until SIGTERM or SIGINT (or `--max-jobs`, `--idle-exit-s`).
 /// The first signal stops it: a training job ends at its next iteration boundary with a
-/// checkpoint upload, an evaluation at once, the job goes back to the queue and the worker
+/// checkpoint upload, an evaluation at its current episode's end with its progress, the job
+/// goes back to the queue and the worker
 /// exits 0, within `grace_s` seconds at most (then it exits anyway, and the job waits for its
 /// lease to expire). A second signal exits at once.
 pub fn worker_main(options: WorkerOptions, grace_s: f64) -> anyhow::Result<()> {

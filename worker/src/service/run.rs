@@ -2,8 +2,10 @@
 //! progress on a client stream, checkpoints uploaded periodically and at the end; training
 //! resumes from the checkpoint the lease names. A worker that is stopping (SIGTERM, SIGINT)
 //! ends a training job at the next iteration boundary with a checkpoint upload, an evaluation
-//! at once, and gives the job back to the queue. The learning itself runs on a blocking
-//! thread (it uses rayon for the environments).
+//! at its current episode's end with its progress (the next lease goes on from there), and
+//! gives the job back to the queue. With the coordinator's MLflow setting, a training job logs
+//! to its MLflow run and an evaluation into its training job's. The learning itself runs on a
+//! blocking thread (it uses rayon for the environments).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
