@@ -129,6 +129,28 @@ pub struct Run {
     pub curve: Vec<CurvePoint>,
 }
 
+impl Run {
+    /// Seconds workers spent training it: the sum over its leases of each lease's wall-clock
+    /// (a curve's `wall_s` starts again with each lease, so a drop marks the next), leaving
+    /// out the time it waited between leases, which `RunFile::train_wall_s` counts.
+    pub fn training_s(&self) -> f64 {
+        let mut total = 0.0;
+        let mut previous: Option<f64> = None;
+        for point in &self.curve {
+            if let Some(p) = previous
+                && point.wall_s < p
+            {
+                total += p;
+            }
+            previous = Some(point.wall_s);
+        }
+        match previous {
+            Some(p) => total + p,
+            None => self.file.train_wall_s,
+        }
+    }
+}
+
 /// A study folder with its finished runs.
 #[derive(Clone, Debug)]
 pub struct Study {
@@ -349,5 +371,31 @@ mod tests {
         let err = read_curve(&path).expect_err("a bad number").to_string();
         assert!(err.contains("line 3") && err.contains("wall_s"), "{err}");
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_resumed_runs_training_time_sums_its_leases_and_leaves_out_the_wait() {
+        // The committed study: IPPO seed 0 trained in two leases, hours apart.
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/builtin");
+        let study = Study::read(&dir).expect("the committed study");
+        let run = study
+            .runs_of("ippo")
+            .find(|r| r.file.seed == 0)
+            .expect("ippo seed 0");
+        assert_eq!(run.file.leases, 2);
+        let drop = run
+            .curve
+            .windows(2)
+            .position(|w| w[1].wall_s < w[0].wall_s)
+            .expect("the second lease starts its clock again");
+        let expected = run.curve[drop].wall_s + run.curve.last().expect("points").wall_s;
+        assert!((run.training_s() - expected).abs() < 1e-9);
+        assert!(run.training_s() < run.file.train_wall_s);
+        // One lease: its curve's last wall-clock.
+        let one = study
+            .runs_of("crm-ppo")
+            .find(|r| r.file.leases == 1)
+            .expect("a one-lease run");
+        assert_eq!(one.training_s(), one.curve.last().expect("points").wall_s);
     }
 }

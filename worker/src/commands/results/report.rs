@@ -320,7 +320,8 @@ fn minutes(seconds: f64) -> String {
 /// Every run: its steps (early stop or budget), leases, wall-clock and overall success.
 fn runs_table(text: &mut String, study: &Study, algorithms: &[&str]) {
     text.push_str(
-        "\n### Runs\n\n| algorithm | seed | steps | ended by | leases | training | evaluations | success, sampled | success, deterministic |\n\
+        "\n### Runs\n\nTraining is the time workers trained each run (its leases' wall-clock summed from the curve: a run given back and resumed waited between leases, which is left out, and redid the steps after its last checkpoint, which are in).\n\n\
+         | algorithm | seed | steps | ended by | leases | training | evaluations | success, sampled | success, deterministic |\n\
          | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     for a in algorithms {
@@ -337,7 +338,7 @@ fn runs_table(text: &mut String, study: &Study, algorithms: &[&str]) {
                     "budget"
                 },
                 r.leases,
-                minutes(r.train_wall_s),
+                minutes(run.training_s()),
                 minutes(r.eval_wall_s + r.eval_deterministic_wall_s),
                 run.eval.success_rate,
                 run.deterministic.success_rate,
@@ -348,10 +349,10 @@ fn runs_table(text: &mut String, study: &Study, algorithms: &[&str]) {
     for a in algorithms {
         let runs: Vec<&Run> = study.runs_of(a).collect();
         let stops = runs.iter().filter(|r| r.file.stopped_early).count();
-        let wall: Vec<f64> = runs.iter().map(|r| r.file.train_wall_s).collect();
+        let wall: Vec<f64> = runs.iter().map(|r| r.training_s()).collect();
         let rate: Vec<f64> = runs
             .iter()
-            .map(|r| r.file.steps as f64 / r.file.train_wall_s)
+            .map(|r| r.file.steps as f64 / r.training_s())
             .collect();
         let _ = writeln!(
             text,
