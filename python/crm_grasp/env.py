@@ -8,6 +8,11 @@ the reward's two parts (`intra_reward`, `transition_reward`; the reward is their
 event that moved the machine (`event`) and every event that held (`events`), the stage's
 `action_mask` (dimensions the stage does not act on are ignored), the `task`, and at an
 episode's end its `outcome` (`success`, `failure (dropped)`, ...).
+
+`render_mode="rgb_array"` draws the scene with the same software renderer as
+`crm record --video` (no display, no GPU): `render()` returns a `(height, width, 3)` uint8
+frame (default 240 x 320, `render_size=(width, height)`), so gymnasium's `RecordVideo` wraps
+the single env; the vector env's `render()` returns one frame per environment.
 """
 
 from __future__ import annotations
@@ -33,6 +38,28 @@ REWARD_MODES = ("crm", "dense", "sparse")
 OBJECTIVES = ("scripted", "learned")
 
 _MAX_SEED = 2**64 - 1
+RENDER_MODES = ["rgb_array"]
+# The frame size of `crm record --video` (grasp_sim::render::DEFAULT_SIZE).
+DEFAULT_RENDER_SIZE = (320, 240)
+
+
+def _render_settings(render_mode, render_size) -> tuple[str | None, tuple[int, int]]:
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode: {render_mode!r} is not one of {RENDER_MODES} or None")
+    try:
+        width, height = (int(v) for v in render_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"render_size: {render_size!r} is not (width, height)") from None
+    if not (16 <= width <= 4096 and 16 <= height <= 4096):
+        raise ValueError(f"render_size: {render_size!r}: width and height are 16 to 4096")
+    return render_mode, (width, height)
+
+
+def _render(batch, k: int, size: tuple[int, int]) -> np.ndarray:
+    width, height = size
+    frame = np.empty((height, width, 3), dtype=np.uint8)
+    batch.render(k, width, height, frame)
+    return frame
 
 
 def _tasks(task: str | Sequence[str] | None, world: str | None) -> list[str]:
@@ -109,11 +136,13 @@ class CrmGraspEnv(gym.Env):
         reward_mode: "crm" (intra-stage and transition rewards), "dense" (intra-stage only,
             LPPO) or "sparse" (transition only, IPPO).
         hold_s: seconds of steady hold the judge asks (default: the paper's 5).
+        render_mode: None or "rgb_array" (`render()` returns the scene as an RGB array).
+        render_size: (width, height) of rendered frames.
 
     `reset(seed=s)` reproduces an episode bit for bit.
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 30}
 
     def __init__(
         self,
@@ -123,7 +152,10 @@ class CrmGraspEnv(gym.Env):
         randomize: bool = True,
         reward_mode: str = "crm",
         hold_s: float | None = None,
+        render_mode: str | None = None,
+        render_size: tuple[int, int] = DEFAULT_RENDER_SIZE,
     ):
+        self.render_mode, self._render_size = _render_settings(render_mode, render_size)
         self._batch = _native_batch(1, task, world, objective, randomize, reward_mode, hold_s)
         self._masks = np.asarray(self._batch.action_masks(), dtype=np.float32)
         self.observation_space = spaces.Box(-np.inf, np.inf, (len(FEATURES),), np.float32)
@@ -161,6 +193,13 @@ class CrmGraspEnv(gym.Env):
             info["outcome"] = outcome
         return obs[0], float(intra + transition), terminated, truncated, info
 
+    def render(self):
+        """The scene as a `(height, width, 3)` uint8 array ("rgb_array"); None without a
+        render mode, as gymnasium's environments do."""
+        if self.render_mode is None:
+            return None
+        return _render(self._batch, 0, self._render_size)
+
     def _start_info(self, stage: int, task: str) -> dict[str, Any]:
         return {
             "stage": STAGES[stage],
@@ -181,7 +220,11 @@ class CrmGraspVectorEnv(VectorEnv):
     after an autoreset draw their seeds from it, so a seeded run repeats bit for bit.
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    metadata = {
+        "autoreset_mode": AutoresetMode.SAME_STEP,
+        "render_modes": RENDER_MODES,
+        "render_fps": 30,
+    }
 
     def __init__(
         self,
@@ -192,9 +235,12 @@ class CrmGraspVectorEnv(VectorEnv):
         randomize: bool = True,
         reward_mode: str = "crm",
         hold_s: float | None = None,
+        render_mode: str | None = None,
+        render_size: tuple[int, int] = DEFAULT_RENDER_SIZE,
     ):
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs: {num_envs!r} is not a positive integer")
+        self.render_mode, self._render_size = _render_settings(render_mode, render_size)
         self.num_envs = num_envs
         self._batch = _native_batch(
             num_envs, task, world, objective, randomize, reward_mode, hold_s
@@ -289,6 +335,14 @@ class CrmGraspVectorEnv(VectorEnv):
                 final_obs=final, _final_obs=ended, final_info=final_info, _final_info=ended
             )
         return obs, intra + transition, terminated, truncated, infos
+
+
+    def render(self):
+        """One `(height, width, 3)` uint8 frame per environment (a tuple, as gymnasium's
+        vector environments return them) with "rgb_array"; None without a render mode."""
+        if self.render_mode is None:
+            return None
+        return tuple(_render(self._batch, k, self._render_size) for k in range(self.num_envs))
 
 
 def _with_masks(infos: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:

@@ -5,7 +5,7 @@
 //! is the episode `crm replay` prints, bit for bit (python/tests).
 
 use crm::{CrmEnv, EnvStep, Environment, Machine, RewardMode, StageId};
-use grasp_sim::{EnvSettings, GraspEnv, Protocol, World};
+use grasp_sim::{EnvSettings, GraspEnv, Protocol, World, render};
 use rayon::prelude::*;
 
 /// What every environment of a batch is made with (the Python constructor's arguments).
@@ -81,6 +81,8 @@ pub struct Step {
 struct Slot {
     env: CrmEnv<Observed>,
     stage: StageId,
+    /// Where the renderer looks from this episode (framed on its start).
+    camera: render::Camera,
     /// The seed of the last explicit reset and the episodes since: autoresets draw from them.
     seed: u64,
     episode: u64,
@@ -131,6 +133,7 @@ impl Batch {
                 Ok(Slot {
                     env: CrmEnv::new(machine.clone(), observed, options.reward_mode),
                     stage: machine.initial(),
+                    camera: render::Camera::framing([0.0; 3], 0.6, 1, 1),
                     seed: 0,
                     episode: 0,
                 })
@@ -180,12 +183,33 @@ impl Batch {
             .map(|(slot, action)| slot.step(action, autoreset))
             .collect()
     }
+
+    /// Environment `k`'s scene now, `width` x `height` RGB, with its stage and task as a
+    /// caption: the frames of `crm record --video`, from a camera fixed for the episode.
+    pub fn render(&self, k: usize, width: u32, height: u32) -> Result<render::Frame, String> {
+        let slot = self.slots.get(k).ok_or("no such environment")?;
+        let env = &slot.env.env().inner;
+        let parts = env.parts();
+        let camera = render::Camera {
+            width,
+            height,
+            ..slot.camera.clone()
+        };
+        let mut frame = render::render(&parts, env.grasp_location().map(Into::into), &camera);
+        if !parts.is_empty() {
+            let stage = self.machine.stage_name(slot.stage);
+            frame.caption(&[(&env.task().id, [255; 3]), (stage, [255; 3])]);
+        }
+        Ok(frame)
+    }
 }
 
 impl Slot {
     fn start(&mut self, seed: u64) -> Result<Start, String> {
         let (stage, _) = self.env.reset(seed).map_err(|e| e.to_string())?;
         self.stage = stage;
+        let parts = self.env.env().inner.parts();
+        self.camera = render::Camera::on_scene(&parts, 1, 1);
         Ok(Start {
             observation: self.env.env().observation.clone(),
             stage,

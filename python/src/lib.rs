@@ -154,6 +154,39 @@ impl NativeBatch {
         Ok((start.stage, start.task))
     }
 
+    /// Draws environment `k`'s scene into `out` (uint8, `height x width x 3`, RGB): the
+    /// software renderer of `crm record --video`, the GIL released.
+    fn render(
+        &self,
+        py: Python<'_>,
+        k: usize,
+        width: u32,
+        height: u32,
+        out: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        if !(16..=4096).contains(&width) || !(16..=4096).contains(&height) {
+            return Err(value_error(format!(
+                "render size: {width}x{height} (width and height are 16 to 4096 pixels)"
+            )));
+        }
+        let buffer = PyBuffer::<u8>::get(out)
+            .map_err(|e| value_error(format!("out: a uint8 array is needed ({e})")))?;
+        let guard = self.lock()?;
+        let batch: &Batch = &guard;
+        let frame = py
+            .detach(|| batch.render(k, width, height))
+            .map_err(value_error)?;
+        drop(guard);
+        if buffer.item_count() != frame.rgb.len() {
+            return Err(value_error(format!(
+                "out: room for {} bytes, {} given",
+                buffer.item_count(),
+                frame.rgb.len()
+            )));
+        }
+        buffer.copy_from_slice(py, &frame.rgb)
+    }
+
     /// Steps every environment with its row of `actions` (float32, `len x 8`, finite), the
     /// GIL released; writes the observations into `obs` (`len x 38`; the next episode's first
     /// one where a step ended an episode and `autoreset` is on) and, where an episode ended,

@@ -1,5 +1,5 @@
 // A run: live training curves with smoothing and x-axis controls, its checkpoints (download,
-// evaluate, how made), its evaluations and its recent episodes.
+// evaluate, how made), its evaluations with their videos and its recent episodes.
 import {
   ApiError, asObject, badge, chartControls, chartSettings, drawChart, duration, el, errorBox, fmtNum,
   fmtBytes, fmtTime, getJson, notFound, onChange, phaseOf, phaseText, send, tasksOf,
@@ -31,6 +31,9 @@ export async function renderRun(main, idText) {
   const episodesInput = el('input', { type: 'text', inputmode: 'numeric', value: '100', name: 'eval-episodes', size: 6 });
   // Evaluations sample the policy (the paper's way) unless the deterministic action is asked for.
   const meanInput = el('input', { type: 'checkbox', name: 'eval-deterministic' });
+  // A GIF of the evaluation's first episodes, which the Videos section plays.
+  const videoInput = el('input', { type: 'checkbox', name: 'eval-video' });
+  const videos = el('div', { id: 'videos' });
 
   const drawCharts = () => {
     const { smooth, x } = chartSettings();
@@ -46,11 +49,13 @@ export async function renderRun(main, idText) {
     message,
     el('h2', {}, 'Checkpoints'),
     el('p', { class: 'muted' }, 'Evaluate with ', episodesInput, ' episodes (',
-      el('label', {}, meanInput, ' deterministic action instead of sampled'), '); the result appears under Evaluations.'),
+      el('label', {}, meanInput, ' deterministic action instead of sampled'), '; ',
+      el('label', {}, videoInput, ' with a video of the first 3 episodes'), '); the result appears under Evaluations.'),
     el('table', { id: 'checkpoints' }, el('thead', {}, el('tr', {},
       ['id', 'steps', 'size', 'saved', ''].map((h) => el('th', {}, h)))), checkpoints),
     lineage,
     el('h2', {}, 'Evaluations'), evaluations,
+    el('h2', {}, 'Videos'), videos,
     el('h2', {}, 'Rerun recording'), recording,
     el('h2', {}, 'Episodes and their stage transitions'), episodes);
 
@@ -66,7 +71,7 @@ export async function renderRun(main, idText) {
     }
   }
 
-  const evaluate = (checkpoint) => queueEvaluation(checkpoint, episodesInput, meanInput, message);
+  const evaluate = (checkpoint) => queueEvaluation(checkpoint, episodesInput, meanInput, message, videoInput);
 
   function show(d) {
     const run = d.run;
@@ -97,6 +102,7 @@ export async function renderRun(main, idText) {
         lineageButton(c, lineage)))));
     if (!d.checkpoints.length) checkpoints.append(el('tr', {}, el('td', { colspan: 5, class: 'muted' }, 'No checkpoint yet.')));
     evaluations.replaceChildren(evaluationTable(d.evaluations));
+    videos.replaceChildren(...videoList(d.videos || []));
     recording.replaceChildren(...recordingInfo(run, d.recording));
     showEpisodes(d);
   }
@@ -133,6 +139,20 @@ export async function renderRun(main, idText) {
   });
 }
 
+// Each evaluation's video (a GIF, played by the browser as it loads), newest first.
+function videoList(list) {
+  if (!list.length) {
+    return [el('p', { class: 'muted' }, 'No video yet: tick "with a video" before Evaluate (or ',
+      el('code', {}, '"video": {"episodes": 3}'), ' in the API), or render one here: ',
+      el('code', {}, 'crm record --checkpoint FILE --video episode.mp4'), '.')];
+  }
+  return list.slice().sort((a, b) => b.job_id - a.job_id).map((v) => el('figure', { class: 'video', 'data-job': v.job_id },
+    el('img', { src: v.download, width: v.width, height: v.height, alt: `evaluation #${v.job_id}: its first ${v.episodes} episodes` }),
+    el('figcaption', {}, `Evaluation #${v.job_id}: first ${v.episodes} episode${v.episodes === 1 ? '' : 's'}, `,
+      `${v.frames} frames at 30 per second, ${fmtBytes(v.size)}. `,
+      el('a', { href: v.download, download: `job${v.job_id}.gif` }, 'Download .gif'))));
+}
+
 function recordingInfo(run, rec) {
   if (!rec) {
     return [el('p', { class: 'muted' }, 'This run records nothing. Submit a job with "record every N episodes" set (or ',
@@ -147,14 +167,15 @@ function recordingInfo(run, rec) {
     el('code', { class: 'command' }, `rerun ${url}`))];
 }
 
-/** Queues an evaluation of `checkpoint` with the episodes and mean-action inputs' values;
+/** Queues an evaluation of `checkpoint` with the episodes, mean-action and video inputs' values;
  * says so (or shows the API's error) in `message`. */
-export async function queueEvaluation(checkpoint, episodesInput, meanInput, message) {
+export async function queueEvaluation(checkpoint, episodesInput, meanInput, message, videoInput) {
   const text = episodesInput.value.trim();
   const count = /^\d+$/.test(text) ? Number(text) : text;
   try {
     const body = { kind: 'eval', checkpoint_id: checkpoint.id, episodes: count };
     if (meanInput.checked) body.deterministic = true;
+    if (videoInput && videoInput.checked) body.video = { episodes: 3 };
     const job = await send('POST', '/api/v1/jobs', body);
     message.replaceChildren(el('div', { class: 'ok' }, `Evaluation job ${job.id} queued for checkpoint ${checkpoint.id}.`));
   } catch (err) {

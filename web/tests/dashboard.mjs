@@ -205,15 +205,25 @@ check('a run page draws its curves, lists checkpoints and evaluations', async ()
   // Run a records every episode: the section offers the file and the viewer command.
   await page.waitForSelector('#recording a[href$="/recording"]');
   assert.match(await page.textContent('#recording'), new RegExp(`rerun http://.*/api/v1/jobs/${runA}/recording`));
-  // Evaluate a checkpoint with the mean action from the page: the job asks for it.
+  // Its evaluation's video plays: the GIF loads at its stored size, with its caption.
+  const video = runData.videos[0];
+  assert.ok(video && video.frames > 1, JSON.stringify(runData.videos));
+  await page.waitForFunction((w) => {
+    const img = document.querySelector('#videos figure img');
+    return img && img.complete && img.naturalWidth === w;
+  }, video.width);
+  assert.match(await page.textContent('#videos figcaption'), new RegExp(`Evaluation #${video.job_id}: first 1 episode, ${video.frames} frames`));
+  // Evaluate a checkpoint with the mean action and a video from the page: the job asks for both.
   await page.fill('input[name="eval-episodes"]', '3');
   await page.check('input[name="eval-deterministic"]');
+  await page.check('input[name="eval-video"]');
   await page.click('#checkpoints tr[data-checkpoint] button:has-text("Evaluate")');
   await page.waitForSelector('.message .ok:has-text("Evaluation job")');
   const queued = Number((await page.textContent('.message .ok')).match(/Evaluation job (\d+)/)[1]);
   const job = await api(`/api/v1/jobs/${queued}`);
   assert.equal(job.spec.deterministic, true);
   assert.equal(job.spec.episodes, 3);
+  assert.deepEqual(job.spec.video, { episodes: 3, width: 320, height: 240 });
   // No worker runs now: cancel it so the other pages see only finished evaluations.
   const cancelled = await fetch(`${base}/api/v1/jobs/${queued}/cancel`, { method: 'POST' });
   assert.equal(cancelled.status, 200);

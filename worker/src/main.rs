@@ -4,6 +4,7 @@ mod commands;
 mod mlflow;
 mod record;
 mod service;
+mod video;
 
 use clap::{Parser, Subcommand};
 

@@ -77,7 +77,7 @@ pub struct TrainDocument {
     pub run: RunSpec,
 }
 
-/// How an evaluation goes: episodes, seed, the action taken, recording.
+/// How an evaluation goes: episodes, seed, the action taken, recording, video.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EvalRunSpec {
@@ -89,6 +89,8 @@ pub struct EvalRunSpec {
     pub deterministic: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub record: Option<RecordSpec>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video: Option<crate::VideoSpec>,
 }
 
 impl Default for EvalRunSpec {
@@ -98,6 +100,7 @@ impl Default for EvalRunSpec {
             seed: 0,
             deterministic: false,
             record: None,
+            video: None,
         }
     }
 }
@@ -223,6 +226,7 @@ impl From<EvalDocument> for EvalSpec {
             tasks: env.tasks,
             topology: env.topology,
             record: run.record,
+            video: run.video,
             objective: env.objective,
             deterministic: run.deterministic,
             hold_s: env.hold_s,
@@ -246,6 +250,7 @@ impl From<EvalSpec> for EvalDocument {
                 seed: spec.seed,
                 deterministic: spec.deterministic,
                 record: spec.record,
+                video: spec.video,
             },
         }
     }

@@ -214,6 +214,9 @@ pub struct EvalSpec {
     /// Recording of evaluated episodes for the rerun viewer; off when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub record: Option<RecordSpec>,
+    /// A video of the first episodes (GIF), stored with the job; off when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video: Option<crate::VideoSpec>,
     /// `scripted` (default, the paper's protocol) or `learned`.
     #[serde(default)]
     pub objective: ObjectiveMode,
@@ -244,6 +247,7 @@ impl Default for EvalSpec {
             tasks: Vec::new(),
             topology: None,
             record: None,
+            video: None,
             objective: ObjectiveMode::default(),
             deterministic: false,
             hold_s: None,

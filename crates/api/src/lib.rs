@@ -26,5 +26,5 @@ pub use document::{EnvSpec, EvalDocument, TrainDocument};
 pub use imitation::{ImitationSpec, parse_shift};
 pub use jobs::{EvalReport, EvalSpec, Iteration, ObjectiveMode, Row, TrainSpec};
 pub use names::check_name;
-pub use record::RecordSpec;
+pub use record::{RecordSpec, VideoSpec};
 pub use validate::SpecError;

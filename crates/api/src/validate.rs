@@ -90,6 +90,9 @@ impl EvalSpec {
             ));
         }
         check_record(&self.record)?;
+        if let Some(video) = &self.video {
+            video.validate().map_err(|e| SpecError::under("video", e))?;
+        }
         check_hold_s(self.hold_s).map_err(|message| SpecError::new("hold_s", message))
     }
 }

@@ -219,3 +219,55 @@ impl Environment for Recorded {
         self.inner.episode_tag()
     }
 }
+
+/// Several recorders watching the same episodes (a rerun recording and a video of one
+/// evaluation): each decides on its own which episodes it follows.
+pub struct Tee(pub Vec<SharedRecorder>);
+
+/// One episode's logs, one a recorder of the [`Tee`] (none where it does not follow it).
+struct TeeLog(Vec<Option<Box<dyn EpisodeLog>>>);
+
+impl Recorder for Tee {
+    fn begin_episode(&mut self, what: &str) -> Option<Box<dyn EpisodeLog>> {
+        let logs: Vec<_> = self.0.iter().map(|r| lock(r).begin_episode(what)).collect();
+        logs.iter()
+            .any(Option::is_some)
+            .then(|| Box::new(TeeLog(logs)) as Box<dyn EpisodeLog>)
+    }
+
+    fn end_episode(&mut self, log: Box<dyn EpisodeLog>, summary: Option<EpisodeRecord>) {
+        if let Ok(tee) = (log as Box<dyn std::any::Any>).downcast::<TeeLog>() {
+            for (recorder, log) in self.0.iter().zip(tee.0) {
+                if let Some(log) = log {
+                    lock(recorder).end_episode(log, summary.clone());
+                }
+            }
+        }
+    }
+
+    fn log_iteration(&mut self, iteration: &Iteration) {
+        for recorder in &self.0 {
+            lock(recorder).log_iteration(iteration);
+        }
+    }
+}
+
+impl EpisodeLog for TeeLog {
+    fn start(&mut self, env: &GraspEnv, stage: &str, stage_id: StageId) {
+        for log in self.0.iter_mut().flatten() {
+            log.start(env, stage, stage_id);
+        }
+    }
+
+    fn step(&mut self, step: i64, env: &GraspEnv, moved: Option<Move<'_>>) {
+        for log in self.0.iter_mut().flatten() {
+            log.step(step, env, moved);
+        }
+    }
+
+    fn end(&mut self, stage: &str, steps: i64, truncated: bool) {
+        for log in self.0.iter_mut().flatten() {
+            log.end(stage, steps, truncated);
+        }
+    }
+}

@@ -34,6 +34,7 @@ pub mod init;
 pub mod observation;
 pub mod oracle;
 pub mod ready;
+pub mod render;
 pub mod scene;
 pub mod setup;
 pub mod spec;

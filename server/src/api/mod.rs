@@ -12,6 +12,7 @@ mod jobs;
 pub mod rate;
 mod resources;
 mod sweeps;
+mod videos;
 
 pub use sweeps::axis_names;
 mod table;
@@ -43,6 +44,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/jobs/{id}/rerun", post(jobs::rerun))
         .route("/jobs/{id}/recording", get(resources::recording))
         .route("/jobs/{id}/tensorboard", get(resources::tensorboard))
+        .route("/jobs/{id}/video", get(videos::video))
         .route("/sweeps", get(sweeps::list).post(sweeps::create))
         .route("/sweeps/{id}", get(sweeps::get))
         .route("/sweeps/{id}/cancel", post(sweeps::cancel))

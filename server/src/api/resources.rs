@@ -80,6 +80,14 @@ pub async fn run(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> 
         .collect();
     let episodes = store.episodes(job.id).await.map_err(err)?;
     let recording = recording_json(&state, job.id).await?;
+    // The videos of its evaluations, newest evaluation first.
+    let mut videos = Vec::new();
+    for evaluation in &evaluations {
+        let video = super::videos::video_json(&state, evaluation.id).await?;
+        if !video.is_null() {
+            videos.push(video);
+        }
+    }
     // Disk the run uses: its checkpoints and its recording.
     let disk_bytes =
         checkpoints.iter().map(|c| c.size).sum::<i64>() + recording["size"].as_i64().unwrap_or(0);
@@ -91,6 +99,7 @@ pub async fn run(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> 
         "evaluations": evaluations,
         "episodes": episodes,
         "recording": recording,
+        "videos": videos,
     }))
     .into_response())
 }
@@ -231,6 +240,7 @@ pub async fn evaluation(State(state): State<Arc<AppState>>, Path(id): Path<Strin
         .map_err(|e| ApiError::store("evaluation", e))?;
     let mut value = json!(job);
     value["recording"] = recording;
+    value["video"] = super::videos::video_json(&state, job.id).await?;
     value["episodes"] = json!(episodes);
     Ok(Json(value).into_response())
 }

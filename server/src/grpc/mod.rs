@@ -21,6 +21,7 @@ use crate::secrets;
 use crate::store::{Lease, NewCheckpoint, StoreError};
 
 mod recording;
+mod video;
 
 /// Bytes per checkpoint chunk sent to workers.
 pub const CHUNK: usize = 256 * 1024;
@@ -472,6 +473,13 @@ impl Coordinator for CoordinatorService {
         request: Request<Streaming<pb::RecordingChunk>>,
     ) -> Result<Response<pb::RecordingReply>, Status> {
         self.append(request).await
+    }
+
+    async fn upload_video(
+        &self,
+        request: Request<Streaming<pb::VideoChunk>>,
+    ) -> Result<Response<pb::VideoReply>, Status> {
+        self.put_video(request).await
     }
 
     type DownloadCheckpointStream =

@@ -12,7 +12,7 @@ use sqlx::error::BoxDynError;
 use sqlx::migrate::{Migration, MigrationSource, MigrationType, Migrator};
 
 /// Every migration file, by name, with its text.
-const FILES: [(&str, &str); 8] = [
+const FILES: [(&str, &str); 9] = [
     (
         "20261122000001_init.sql",
         include_str!("../../../migrations/20261122000001_init.sql"),
@@ -44,6 +44,10 @@ const FILES: [(&str, &str); 8] = [
     (
         "20261128000001_eval_progress.sql",
         include_str!("../../../migrations/20261128000001_eval_progress.sql"),
+    ),
+    (
+        "20261129000001_videos.sql",
+        include_str!("../../../migrations/20261129000001_videos.sql"),
     ),
 ];
 

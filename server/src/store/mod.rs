@@ -1,5 +1,5 @@
 //! The sqlite store (sqlx, WAL): workers, jobs and their leases, metric series, episode
-//! summaries, checkpoints and rerun recordings (`recordings.rs`). Migrations in `migrations/` are applied when it opens. Every
+//! summaries, checkpoints, rerun recordings (`recordings.rs`) and evaluation videos (`videos.rs`). Migrations in `migrations/` are applied when it opens. Every
 //! state change is one statement or one transaction, so a refused request changes nothing.
 
 use std::path::{Path, PathBuf};
@@ -33,10 +33,12 @@ mod recordings;
 mod sweeps;
 #[cfg(test)]
 mod tests;
+mod videos;
 
 pub use checkpoints::{CheckpointRow, NewCheckpoint};
 pub use recordings::RecordingRow;
 pub use sweeps::SweepRow;
+pub use videos::{VideoInfo, VideoRow};
 
 /// Milliseconds since the Unix epoch.
 pub fn now_ms() -> i64 {
@@ -695,7 +697,19 @@ impl Store {
                     .fetch_optional(&mut *tx)
                     .await?;
             files.extend(recording.map(|(file, size)| (self.recordings.join(file), size)));
-            for table in ["metrics", "episodes", "recordings", "idempotency_keys"] {
+            let video: Option<(String, i64)> =
+                sqlx::query_as("SELECT file, size FROM videos WHERE job_id = ?")
+                    .bind(job)
+                    .fetch_optional(&mut *tx)
+                    .await?;
+            files.extend(video.map(|(file, size)| (self.recordings.join(file), size)));
+            for table in [
+                "metrics",
+                "episodes",
+                "recordings",
+                "videos",
+                "idempotency_keys",
+            ] {
                 sqlx::query(&format!("DELETE FROM {table} WHERE job_id = ?"))
                     .bind(job)
                     .execute(&mut *tx)

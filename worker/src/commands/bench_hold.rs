@@ -90,6 +90,7 @@ fn compare(
         tasks: Vec::new(),
         topology: None,
         record: None,
+        video: None,
         objective: env.protocol,
         deterministic: false,
         hold_s: env.hold_s,

@@ -65,6 +65,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         tasks: args.task.clone(),
         topology: args.topology.clone(),
         record: None,
+        video: None,
         objective: args.env.protocol,
         deterministic: args.deterministic,
         hold_s: args.env.hold_s,

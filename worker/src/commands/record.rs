@@ -1,5 +1,6 @@
-//! `crm record`: replay one evaluation episode of a checkpoint into a rerun recording file or
-//! a live viewer; `crm record --inspect FILE` says what a recording holds.
+//! `crm record`: replay evaluation episodes of a checkpoint into a rerun recording file, a
+//! live viewer or a video (`--video out.mp4` or `.gif`, drawn by the software renderer);
+//! `crm record --inspect FILE` says what a recording holds.
 
 use std::path::PathBuf;
 
@@ -8,6 +9,7 @@ use crm_api::{EvalSpec, RecordSpec};
 
 use super::{EnvArgs, emit};
 use crate::record::{Recorder, Target, inspect, lock, reachable};
+use crate::video::{self, VideoRecorder};
 use crm_run::eval::evaluate;
 
 #[derive(clap::Args, Debug)]
@@ -27,13 +29,22 @@ pub struct RecordArgs {
     #[arg(long)]
     pub topology: Option<String>,
     /// Write the recording here (`.rrd`; open with `rerun FILE`).
-    #[arg(long, conflicts_with = "connect", required_unless_present_any = ["connect", "inspect"])]
+    #[arg(long, conflicts_with = "connect", required_unless_present_any = ["connect", "inspect", "video"])]
     pub out: Option<PathBuf>,
+    /// Write a video of the episodes here: `.mp4` (H.264, through ffmpeg) or `.gif`.
+    #[arg(long, value_name = "FILE")]
+    pub video: Option<PathBuf>,
+    /// Episodes to record, one after another (seeds SEED, SEED+1, ...).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    pub episodes: u64,
+    /// The video's frame size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "320x240", value_parser = crate::video::parse_size)]
+    pub size: (u32, u32),
     /// Stream to a running viewer instead (`rerun+http://127.0.0.1:9876/proxy`).
     #[arg(long)]
     pub connect: Option<String>,
     /// Print what a recording file holds (JSON) instead of recording.
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["checkpoint", "out", "connect"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["checkpoint", "out", "connect", "video"])]
     pub inspect: Option<PathBuf>,
 }
 
@@ -49,48 +60,73 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     if let Some(url) = &args.connect {
         reachable(url).map_err(|why| anyhow::anyhow!("--connect: {why}"))?;
     }
-    if let Some(out) = &args.out
-        && out.is_dir()
-    {
-        bail!("--out: {} is a folder; give a file name", out.display());
+    for (flag, path) in [("--out", &args.out), ("--video", &args.video)] {
+        if let Some(path) = path
+            && path.is_dir()
+        {
+            bail!("{flag}: {} is a folder; give a file name", path.display());
+        }
+    }
+    if let Some(video) = &args.video {
+        video::Format::of(video).map_err(|e| anyhow::anyhow!("--video: {e}"))?;
     }
     let record = RecordSpec {
         every: 1,
-        max_episodes: 1,
+        max_episodes: args.episodes,
         connect: args.connect.clone(),
     };
     let name = checkpoint
         .file_name()
         .map_or("checkpoint".into(), |n| n.to_string_lossy().to_string());
-    let recorder = Recorder::new(&record, name).shared();
-    if *lock(&recorder).target() == Target::Off {
+    let rerun = (args.out.is_some() || args.connect.is_some())
+        .then(|| Recorder::new(&record, name).shared());
+    if let Some(recorder) = &rerun
+        && *lock(recorder).target() == Target::Off
+    {
         bail!("--connect: the viewer stopped answering");
     }
+    let video = args
+        .video
+        .as_ref()
+        .map(|_| VideoRecorder::new(args.episodes, args.size).shared());
+    let mut recorders: Vec<crm_run::SharedRecorder> = Vec::new();
+    if let Some(r) = &rerun {
+        recorders.push(r.clone());
+    }
+    if let Some(v) = &video {
+        recorders.push(v.clone());
+    }
+    let recorder: crm_run::SharedRecorder = if recorders.len() == 1 {
+        recorders.remove(0)
+    } else {
+        std::sync::Arc::new(std::sync::Mutex::new(crm_run::record::Tee(recorders)))
+    };
     let spec = EvalSpec {
         world: None,
-        episodes: 1,
+        episodes: args.episodes,
         seed: args.seed,
         task: args.task.clone(),
         tasks: Vec::new(),
         topology: args.topology.clone(),
         record: Some(record),
+        video: None,
         objective: args.env.protocol,
         deterministic: false,
         hold_s: args.env.hold_s,
     };
-    let mut episode = None;
+    let mut episodes = Vec::new();
     evaluate(
         &checkpoint,
         &spec,
         args.env.env(),
-        Some(recorder.clone() as crm_run::SharedRecorder),
+        Some(recorder),
         |_, _, e| {
-            episode = Some(e.clone());
+            episodes.push(e.clone());
             true
         },
     )?;
-    let episode = episode.context("no episode ran")?;
-    let bytes = lock(&recorder).take_pending();
+    let episode = episodes.first().context("no episode ran")?;
+    let bytes = rerun.as_ref().and_then(|r| lock(r).take_pending());
     let written = match (&args.out, bytes) {
         (Some(out), Some((bytes, _))) => {
             let partial = out.with_extension("rrd.partial");
@@ -101,6 +137,24 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         }
         _ => 0,
     };
+    let video_written = match (&args.video, &video) {
+        (Some(path), Some(video)) => {
+            let (frames, first) = {
+                let mut video = video::lock(video);
+                (video.take_frames(), video.first)
+            };
+            video::write(&frames, path).map_err(|e| anyhow::anyhow!("--video: {e}"))?;
+            Some(serde_json::json!({
+                "file": path.display().to_string(),
+                "frames": frames.len(),
+                "width": args.size.0,
+                "height": args.size.1,
+                "fps": video::FPS,
+                "first_frame": first,
+            }))
+        }
+        _ => None,
+    };
     let report = serde_json::json!({
         "task": episode.task,
         "success": episode.success,
@@ -108,9 +162,13 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         "transitions": episode.transitions.iter().map(|(step, from, to, event, reward)| {
             serde_json::json!({"step": step, "from": from, "to": to, "event": event, "reward": reward})
         }).collect::<Vec<_>>(),
+        "episodes": episodes.iter().map(|e| serde_json::json!({
+            "task": e.task, "success": e.success, "length": e.length,
+        })).collect::<Vec<_>>(),
         "out": args.out.as_ref().map(|p| p.display().to_string()),
         "connect": args.connect,
         "bytes": written,
+        "video": video_written,
     });
     emit(&format!("{report}\n"))
 }

@@ -20,16 +20,10 @@ pub const MAX_CONTACTS: usize = 32;
 /// Arrow length per newton of contact force.
 const METRES_PER_NEWTON: f32 = 0.005;
 
+/// The part's colour: the same palette the videos draw with.
 fn color(name: &str) -> rerun::Color {
-    if name == "table" {
-        rerun::Color::from_rgb(150, 120, 90)
-    } else if name.starts_with("object") {
-        rerun::Color::from_rgb(70, 130, 200)
-    } else if name == "hand/palm" {
-        rerun::Color::from_rgb(210, 180, 150)
-    } else {
-        rerun::Color::from_rgb(230, 200, 170)
-    }
+    let [r, g, b] = grasp_sim::render::part_color(name);
+    rerun::Color::from_rgb(r, g, b)
 }
 
 /// Rotates rerun's cylinder axis (z) onto rapier's (y): -90 degrees about x.
@@ -154,7 +148,10 @@ pub fn log_contacts(
             "world/grasp_location",
             &rerun::Points3D::new([location])
                 .with_radii([0.006])
-                .with_colors([rerun::Color::from_rgb(40, 180, 60)]),
+                .with_colors([{
+                    let [r, g, b] = grasp_sim::render::GRASP_LOCATION_COLOR;
+                    rerun::Color::from_rgb(r, g, b)
+                }]),
         )?;
     }
     Ok(())

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use crm_proto::pb::coordinator_client::CoordinatorClient;
-use crm_proto::pb::{self, checkpoint_chunk, recording_chunk};
+use crm_proto::pb::{self, checkpoint_chunk, recording_chunk, video_chunk};
 use tonic::metadata::{Ascii, MetadataValue};
 use tonic::service::interceptor::InterceptedService;
 use tonic::transport::Channel;
@@ -188,6 +188,41 @@ impl Client {
             .inner
             .clone()
             .append_recording(tokio_stream::iter(chunks))
+            .await?;
+        Ok(reply.into_inner().size)
+    }
+
+    /// Stores `gif` as `job`'s video (`episodes` episodes in `frames` frames of `size`);
+    /// returns the stored size.
+    pub async fn upload_video(
+        &self,
+        job: i64,
+        gif: &[u8],
+        episodes: u32,
+        frames: u32,
+        size: (u32, u32),
+    ) -> anyhow::Result<u64> {
+        let meta = pb::VideoChunk {
+            body: Some(video_chunk::Body::Meta(pb::VideoMeta {
+                job_id: job,
+                worker_id: self.worker_id.clone(),
+                size: gif.len() as u64,
+                episodes,
+                frames,
+                width: size.0,
+                height: size.1,
+                lease_token: self.lease_token.clone(),
+            })),
+        };
+        let chunks: Vec<pb::VideoChunk> = std::iter::once(meta)
+            .chain(gif.chunks(CHUNK).map(|c| pb::VideoChunk {
+                body: Some(video_chunk::Body::Data(c.to_vec())),
+            }))
+            .collect();
+        let reply = self
+            .inner
+            .clone()
+            .upload_video(tokio_stream::iter(chunks))
             .await?;
         Ok(reply.into_inner().size)
     }

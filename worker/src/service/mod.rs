@@ -7,6 +7,7 @@ pub mod client;
 pub mod policy;
 pub mod run;
 pub mod up;
+mod video;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

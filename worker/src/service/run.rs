@@ -22,6 +22,8 @@ use crate::record::{Recorder, SharedRecorder, lock};
 use crm_run::Env;
 use crm_run::Trainer;
 use crm_run::eval::{EpisodeRecord, EvalProgress, evaluate_from};
+
+use super::video::{EvalVideo, combined};
 use crm_run::imitation;
 
 /// A scratch folder removed on drop.
@@ -34,10 +36,10 @@ impl Drop for Scratch {
 }
 
 /// What the blocking part needs to talk to the coordinator.
-struct Link {
-    client: Client,
+pub(super) struct Link {
+    pub(super) client: Client,
     job: i64,
-    handle: tokio::runtime::Handle,
+    pub(super) handle: tokio::runtime::Handle,
     progress: mpsc::Sender<pb::Progress>,
     cancelled: Arc<AtomicBool>,
     /// The worker is stopping: end the job where it can be resumed and give it back.
@@ -381,14 +383,19 @@ fn eval(
     if let Some(recorder) = &recorder {
         lock(recorder).skip_episodes(resumed_from);
     }
+    let mut video = EvalVideo::for_job(&spec, resumed_from);
+    let runtime = combined(crate::record::for_runtime(&recorder), video.as_ref());
     let report = evaluate_from(
         &path,
         &spec,
         &env,
-        crate::record::for_runtime(&recorder),
+        runtime,
         &mut from,
         |done, total, record| {
             ship(link, job.job_id, recorder.as_ref());
+            if let Some(video) = &mut video {
+                video.ship_when_done(link, job.job_id, done, total);
+            }
             let mut sent = link.send(summary(record));
             if sent.is_ok() && (done == total || last.elapsed() >= Duration::from_secs(1)) {
                 last = Instant::now();
