@@ -243,3 +243,59 @@ fn a_drafted_four_finger_world_checks_and_trains() {
     train_two_iterations(&root, &root.join("world4"), &root.join("run4"));
     std::fs::remove_dir_all(root).ok();
 }
+
+/// `crm world check` refuses a profile that couples a joint otherwise than the hand's
+/// description, naming the joint and both couplings, until the profile overrides it by name.
+#[test]
+fn world_check_refuses_a_coupling_against_the_description_unless_overridden() {
+    let root = test_world("check-couplings");
+    let world = root.join("world");
+    let dir = world.to_str().expect("utf-8");
+    let (code, stdout, stderr) = crm(&root, &["world", "check", dir]);
+    assert_eq!(code, 0, "{stderr}");
+    let before: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+    let profile_path = world.join("hand.json");
+    let text = std::fs::read_to_string(&profile_path).expect("hand.json");
+    let mut profile: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    // The paper's thumb coupling where the description says thumb_ip = 0.5 thumb_tmcp.
+    for joint in profile["fingers"]["thumb"]["joints"]
+        .as_array_mut()
+        .expect("joints")
+    {
+        if joint["joint"] == "thumb_ip" {
+            joint["ratio"] = serde_json::json!(0.9);
+        }
+    }
+    std::fs::write(&profile_path, profile.to_string()).expect("write");
+    let (code, _, stderr) = crm(&root, &["world", "check", dir]);
+    assert_ne!(code, 0);
+    assert!(
+        stderr.contains("joint \"thumb_ip\"")
+            && stderr.contains("thumb_ip = 0.5 x thumb_tmcp + 0")
+            && stderr.contains("thumb_ip = 0.9 x thumb_tmcp + 0")
+            && stderr.contains("description_overrides"),
+        "{stderr}"
+    );
+    profile["description_overrides"] = serde_json::json!(["thumb_ip"]);
+    std::fs::write(&profile_path, profile.to_string()).expect("write");
+    let (code, stdout, stderr) = crm(&root, &["world", "check", dir]);
+    assert_eq!(code, 0, "{stderr}");
+    let after: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+    let overrides = after["description_overrides"].as_array().expect("listed");
+    assert_eq!(overrides.len(), 1);
+    assert!(overrides[0].as_str().expect("text").contains("thumb_ip"));
+    // Another coupling is another world; the override itself is not in the hash.
+    assert_ne!(after["hash"], before["hash"]);
+    profile
+        .as_object_mut()
+        .expect("object")
+        .remove("description_overrides");
+    std::fs::write(&profile_path, profile.to_string()).expect("write");
+    let loaded = grasp_sim::World::load_with(
+        &world,
+        &grasp_sim::assets::Assets::parse(&root.join("assets").display().to_string()),
+    )
+    .expect("loads");
+    assert_eq!(serde_json::json!(loaded.hash), after["hash"]);
+    std::fs::remove_dir_all(root).ok();
+}

@@ -272,7 +272,7 @@ impl World {
         without.dedup();
         benchmark.sensors_without = without.clone();
         let approach = file.approach.unwrap_or_default();
-        let profile_hash = world_hash(&canonical(&profile_text), &spec_text, &without, approach);
+        let profile_hash = world_hash(&profile_text, &spec_text, &without, approach);
         if let Some(randomization) = &file.randomization
             && [
                 randomization.position,
@@ -303,7 +303,7 @@ impl World {
     /// Revolute joints of the hand, its links and the fingers it acts with.
     pub fn summary(&self) -> serde_json::Value {
         let hand = &self.benchmark.hand;
-        serde_json::json!({
+        let mut summary = serde_json::json!({
             "world": self.name,
             "hand": {
                 "source": self.source,
@@ -314,7 +314,31 @@ impl World {
             "objects": self.benchmark.objects.len(),
             "tasks": self.benchmark.tasks.len(),
             "hash": self.hash,
-        })
+        });
+        let couplings = &hand.couplings;
+        if !couplings.overridden.is_empty() {
+            summary["description_overrides"] = couplings
+                .overridden
+                .iter()
+                .map(ToString::to_string)
+                .collect();
+        }
+        summary
+    }
+
+    /// The profile's couplings that contradict the description's without an override, each
+    /// naming the joint and both couplings (`crm world check` refuses a world with any), and
+    /// overrides that name a joint without a conflict.
+    pub fn coupling_conflicts(&self) -> (Vec<String>, Vec<String>) {
+        let couplings = &self.benchmark.hand.couplings;
+        (
+            couplings
+                .conflicts
+                .iter()
+                .map(ToString::to_string)
+                .collect(),
+            couplings.needless.clone(),
+        )
     }
 }
 
@@ -327,6 +351,20 @@ fn canonical(text: &str) -> String {
     serde_json::from_str::<serde_json::Value>(text)
         .map(|v| v.to_string())
         .unwrap_or_else(|_| text.to_string())
+}
+
+/// A profile as [`canonical`] without its `description_overrides`, which acknowledge the
+/// description's couplings and change nothing the hand does.
+fn canonical_profile(text: &str) -> String {
+    match serde_json::from_str::<serde_json::Value>(text) {
+        Ok(mut value) => {
+            if let Some(map) = value.as_object_mut() {
+                map.remove("description_overrides");
+            }
+            value.to_string()
+        }
+        Err(_) => text.to_string(),
+    }
 }
 
 /// The world's hash: its profile hash and the hand's files' content.
@@ -342,7 +380,7 @@ fn with_content(profile_hash: &str, content: &[u8; 32]) -> String {
 /// hashes their checkpoints recorded) the approach geometry.
 fn world_hash(profile: &str, spec: &str, without: &[usize], approach: Approach) -> String {
     let mut hasher = Sha256::new();
-    hasher.update(canonical(profile).as_bytes());
+    hasher.update(canonical_profile(profile).as_bytes());
     hasher.update([0]);
     hasher.update(canonical(spec).as_bytes());
     hasher.update([0]);

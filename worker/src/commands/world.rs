@@ -6,6 +6,8 @@
 
 use std::path::PathBuf;
 
+use anyhow::bail;
+
 use super::emit;
 
 #[derive(clap::Subcommand, Debug)]
@@ -69,10 +71,38 @@ pub struct ImportArgs {
     pub approach: Option<String>,
 }
 
+/// The profile file a world folder names (`world.json`'s `hand`), for messages.
+fn world_hand_file(dir: &std::path::Path) -> String {
+    std::fs::read_to_string(dir.join("world.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| v["hand"].as_str().map(String::from))
+        .unwrap_or_else(|| "hand.json".into())
+}
+
 pub fn run(command: WorldCommand) -> anyhow::Result<()> {
     match command {
         WorldCommand::Check(args) => {
             let world = grasp_sim::World::load(&args.dir)?;
+            let (conflicts, needless) = world.coupling_conflicts();
+            let profile = args.dir.join(world_hand_file(&args.dir));
+            if !conflicts.is_empty() {
+                bail!(
+                    "{}: the profile contradicts the hand's description:\n  {}\nfollow the \
+                     description, or name each joint in `description_overrides` to keep the \
+                     profile's coupling on purpose",
+                    profile.display(),
+                    conflicts.join("\n  ")
+                );
+            }
+            if !needless.is_empty() {
+                bail!(
+                    "{}: description_overrides names {} without a conflicting coupling: take \
+                     them out",
+                    profile.display(),
+                    needless.join(", ")
+                );
+            }
             emit(&format!("{}\n", world.summary()))
         }
         WorldCommand::ImportDexmobile(args) => {

@@ -216,16 +216,21 @@ impl Description {
                 });
             }
         }
-        for coupling in robot.joint_couplings.iter().filter(|c| c.active) {
-            let leader = robot.joints[coupling.joint1].name.clone();
-            let follower = robot.joints[coupling.joint2].name.clone();
-            if let (Some(leader), Some(follower)) = (leader, follower)
-                && let Some(joint) = joints.iter_mut().find(|j| j.name == follower)
+        // `<equality><joint joint1 joint2 polycoef>` as MuJoCo defines it: joint1 follows
+        // joint2, `q1 = polycoef[0] + polycoef[1] q2` (higher terms are not couplings a
+        // finger's command can carry). The loader's own `joint_couplings` take joint2 as the
+        // follower and add its approximation of every fixed tendon; neither is the
+        // description's word.
+        for equality in &model.equality {
+            if let rapier3d_mjcf::mjcf_rs::equality::Equality::Joint(eq) = equality
+                && eq.common.active
+                && let Some(leader) = &eq.joint2
+                && let Some(joint) = joints.iter_mut().find(|j| j.name == eq.joint1)
             {
                 joint.mimic = Some(Mimic {
-                    leader,
-                    ratio: coupling.coeff,
-                    offset: coupling.offset,
+                    leader: leader.clone(),
+                    ratio: eq.polycoef[1] as f32,
+                    offset: eq.polycoef[0] as f32,
                 });
             }
         }

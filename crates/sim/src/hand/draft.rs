@@ -66,7 +66,18 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
             let roots: Vec<usize> = (0..description.links.len())
                 .filter(|&l| description.joints.iter().all(|j| j.child != l))
                 .collect();
-            let mut link = *roots.first().ok_or("the description has no root link")?;
+            // An MJCF palm welded to the world (no joint) is a root of its own beside the
+            // world body: start from the root with the most moving joints below it.
+            let moving_under = |link: usize| -> usize {
+                children(link)
+                    .into_iter()
+                    .map(|j| moving_below(description, j))
+                    .sum()
+            };
+            let mut link = *roots
+                .iter()
+                .max_by_key(|&&r| (moving_under(r), std::cmp::Reverse(r)))
+                .ok_or("the description has no root link")?;
             loop {
                 let branches: Vec<usize> = children(link)
                     .into_iter()
@@ -464,6 +475,7 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
         topologies,
         relaxed: BTreeMap::new(),
         held,
+        description_overrides: Vec::new(),
     };
     Ok(Draft { profile, notes })
 }

@@ -9,6 +9,7 @@
 //! its command through the coupling, the others hold the topology's angles.
 
 pub mod builtin;
+pub mod couplings;
 pub mod description;
 pub mod draft;
 mod finger;

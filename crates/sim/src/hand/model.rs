@@ -72,6 +72,9 @@ pub struct HandModel {
     shapes: BTreeMap<Topology, [FingerShape; 5]>,
     /// Per topology, the angle of every joint no finger commands.
     held: BTreeMap<Topology, Vec<(usize, f32)>>,
+    /// The profile's couplings against the description's (`crm world check` refuses the
+    /// conflicts it does not override).
+    pub couplings: super::couplings::Couplings,
 }
 
 fn finite(values: &[f32]) -> bool {
@@ -412,6 +415,17 @@ impl HandModel {
                     &rapier3d::math::Matrix::from_cols(along, side, -approach).transpose(),
                 )
             };
+        for (k, name) in profile.description_overrides.iter().enumerate() {
+            if description.joint(name).is_none() {
+                return Err(invalid(
+                    format!("description_overrides[{k}]"),
+                    format!(
+                        "the description has no joint {name:?}{}",
+                        did_you_mean(name, description.joints.iter().map(|j| j.name.as_str()))
+                    ),
+                ));
+            }
+        }
         Ok(Self {
             source: description.source,
             links,
@@ -429,6 +443,11 @@ impl HandModel {
             motor: profile.motor,
             shapes,
             held,
+            couplings: super::couplings::Couplings::default(),
+        })
+        .map(|mut model| {
+            model.couplings = super::couplings::check(description, profile, &model);
+            model
         })
     }
 

@@ -52,6 +52,12 @@ pub struct Profile {
     /// hand that no finger commands is held at 0.
     #[serde(default)]
     pub held: BTreeMap<String, f32>,
+    /// Joints whose coupling in the description (URDF `<mimic>`, MJCF equalities, tendons)
+    /// this profile replaces on purpose: `crm world check` refuses a profile that couples,
+    /// commands or holds such a joint otherwise unless it is named here. It changes nothing
+    /// the hand does, so it is not in the world's hash.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub description_overrides: Vec<String>,
 }
 
 /// The compliant joint between the arm's mount and the palm (a bounded linear spring; the

@@ -469,8 +469,20 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
     };
     let description_path = repo.join(svh::DESCRIPTION);
     let description = Description::load(&description_path, &assets)?;
-    let profile = svh::profile(&description)
+    let mut profile = svh::profile(&description)
         .map_err(|message| invalid_at(&description_path, "robot", message))?;
+    // Where the authors' hand couples, commands or holds a joint otherwise than the SVH's
+    // description does, the import keeps theirs and says so (`crm world check` asks it).
+    if let Ok(model) = crate::hand::HandModel::new(&description, &profile, &description_path) {
+        let mut joints: Vec<String> = model
+            .couplings
+            .conflicts
+            .iter()
+            .map(|c| c.joint.clone())
+            .collect();
+        joints.dedup();
+        profile.description_overrides = joints;
+    }
 
     let world = write_world(out, "import", |staging| {
         let mut world = json!({

@@ -257,6 +257,8 @@ pub fn profile(description: &Description) -> Result<Profile, String> {
             ("right_hand_index_spread".into(), 0.0),
             ("right_hand_ring_spread".into(), 0.0),
         ]),
+        // Filled by the import from the couplings the authors' profile overrides.
+        description_overrides: Vec::new(),
     })
 }
 
