@@ -299,3 +299,119 @@ fn world_check_refuses_a_coupling_against_the_description_unless_overridden() {
     assert_eq!(serde_json::json!(loaded.hash), after["hash"]);
     std::fs::remove_dir_all(root).ok();
 }
+
+/// `crm world fit-grasps` on a test world with a task broken on purpose (its grasp location
+/// 4 cm above where the hand holds the blocks): it finds an offset the oracle succeeds with on
+/// seeds the search did not use, writes a world of its own hash whose corrections are data,
+/// leaves the source as it was, and refuses to fit a fitted world.
+#[test]
+fn fit_grasps_corrects_a_task_broken_on_purpose() {
+    let root = test_world("fit-grasps");
+    let world = root.join("world");
+    let benchmark_path = world.join("benchmark.json");
+    let mut benchmark: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&benchmark_path).expect("read"))
+            .expect("JSON");
+    for task in benchmark["tasks"].as_array_mut().expect("tasks") {
+        if task["id"] == "blocks-lift" {
+            task["grasp"]["offset"] = serde_json::json!([0.0, 0.0, 0.09]);
+        }
+    }
+    std::fs::write(&benchmark_path, benchmark.to_string()).expect("write");
+    let source = std::fs::read_to_string(&benchmark_path).expect("read");
+    let oracle = |dir: &Path| -> serde_json::Value {
+        let (code, stdout, stderr) = crm(
+            &root,
+            &[
+                "oracle",
+                "--world",
+                dir.to_str().expect("utf-8"),
+                "--seed",
+                "200",
+                "--seeds",
+                "4",
+                "--json",
+            ],
+        );
+        assert_eq!(code, 0, "{stderr}");
+        serde_json::from_str(&stdout).expect("JSON")
+    };
+    assert_eq!(
+        oracle(&world)["per_task"]["blocks-lift"]["success_rate"],
+        0.0
+    );
+
+    let out = root.join("fitted");
+    let args = [
+        "world",
+        "fit-grasps",
+        world.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--seeds",
+        "3",
+        "--check-seeds",
+        "3",
+    ];
+    let (code, stdout, stderr) = crm(&root, &args);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stderr.contains("| blocks-lift |"), "{stderr}");
+    let line: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+    let offset = line["corrections"]["blocks-lift"]
+        .as_array()
+        .expect("corrected")
+        .clone();
+    assert_eq!(
+        line["corrections"].as_object().map(|o| o.len()),
+        Some(1),
+        "{line}"
+    );
+    assert!(offset[2].as_f64().expect("dz") < -0.01, "{offset:?}");
+    let corrections: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("corrections.json")).expect("written"),
+    )
+    .expect("JSON");
+    let task = &corrections["tasks"]["blocks-lift"];
+    assert_eq!(task["before"], 0.0);
+    assert!(
+        task["after"].as_f64() > Some(0.6) && task["after_check"].as_f64() > Some(0.6),
+        "{task}"
+    );
+    assert!(
+        corrections["command"]
+            .as_str()
+            .expect("command")
+            .contains("fit-grasps")
+    );
+    // The fitted world: its own hash, its corrections printed by `world check`, and the
+    // oracle holds the blocks on seeds neither the search nor the check used.
+    let (code, stdout, stderr) = crm(&root, &["world", "check", out.to_str().expect("utf-8")]);
+    assert_eq!(code, 0, "{stderr}");
+    let checked: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+    assert_eq!(checked["corrections"], line["corrections"]);
+    let (_, before, _) = crm(&root, &["world", "check", world.to_str().expect("utf-8")]);
+    let before: serde_json::Value = serde_json::from_str(&before).expect("JSON");
+    assert_ne!(checked["hash"], before["hash"]);
+    assert!(oracle(&out)["per_task"]["blocks-lift"]["success_rate"].as_f64() > Some(0.5));
+    assert_eq!(
+        std::fs::read_to_string(&benchmark_path).expect("read"),
+        source
+    );
+    // A fitted world is not fitted again; a non-empty --out is refused.
+    let (code, _, stderr) = crm(
+        &root,
+        &[
+            "world",
+            "fit-grasps",
+            out.to_str().expect("utf-8"),
+            "--out",
+            root.join("again").to_str().expect("utf-8"),
+        ],
+    );
+    assert_ne!(code, 0);
+    assert!(stderr.contains("already corrects"), "{stderr}");
+    let (code, _, stderr) = crm(&root, &args);
+    assert_ne!(code, 0);
+    assert!(stderr.contains("not empty"), "{stderr}");
+    std::fs::remove_dir_all(root).ok();
+}

@@ -15,6 +15,7 @@ pub mod env;
 pub mod error;
 pub mod eval;
 pub mod export;
+pub mod fit;
 pub mod imitation;
 pub mod record;
 pub mod topology;

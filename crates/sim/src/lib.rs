@@ -25,6 +25,7 @@ pub mod assets;
 pub mod benchmark;
 pub mod config;
 pub mod contacts;
+pub mod corrections;
 pub mod env;
 pub mod error;
 pub mod events;

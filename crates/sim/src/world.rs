@@ -18,6 +18,7 @@ use sha2::{Digest, Sha256};
 use crate::assets::Assets;
 use crate::benchmark::{Benchmark, SharedHand};
 use crate::config::{Approach, Randomization};
+use crate::corrections::Corrections;
 use crate::error::{Error, Result, parse_json, read_text};
 use crate::hand::HandModel;
 use crate::hand::description::{Description, Source};
@@ -53,6 +54,10 @@ pub struct WorldFile {
     /// of the hash, so a copy of the same files elsewhere makes the same world.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub assets: Vec<PathBuf>,
+    /// Corrections to the tasks' grasp locations (`crm world fit-grasps`; [`Corrections`]).
+    /// Part of the hash when present.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corrections: Option<String>,
 }
 
 /// Observation features a real robot cannot measure: features by name (`force_x`) or the
@@ -109,6 +114,8 @@ pub struct World {
     /// the sensors and every file of the hand by content (its description, the files that
     /// includes, its meshes), never where the files lie. Checkpoints record it.
     pub hash: String,
+    /// What the world corrects in its tasks' grasp locations, if anything.
+    pub corrections: Option<Corrections>,
     /// The hash of the profile, the spec and the sensors alone: what checkpoints recorded
     /// before the hand's files were in [`World::hash`]. A checkpoint that recorded it is
     /// accepted where the three match.
@@ -140,6 +147,7 @@ impl World {
             approach: Approach::Free,
             hash: with_content(&profile_hash, &content.finalize().into()),
             profile_hash,
+            corrections: None,
         }
     }
 
@@ -272,7 +280,20 @@ impl World {
         without.dedup();
         benchmark.sensors_without = without.clone();
         let approach = file.approach.unwrap_or_default();
-        let profile_hash = world_hash(&profile_text, &spec_text, &without, approach);
+        let corrections = match &file.corrections {
+            Some(name) => {
+                let path = find("corrections", name)?;
+                let text = read_text(&path)?;
+                let corrections: Corrections = parse_json(&text, &path.display().to_string())?;
+                corrections.apply(&mut benchmark, &path)?;
+                Some((corrections, text))
+            }
+            None => None,
+        };
+        let mut profile_hash = world_hash(&profile_text, &spec_text, &without, approach);
+        if let Some((_, text)) = &corrections {
+            profile_hash = with_corrections(&profile_hash, text);
+        }
         if let Some(randomization) = &file.randomization
             && [
                 randomization.position,
@@ -297,6 +318,7 @@ impl World {
             approach,
             hash: with_content(&profile_hash, &description.content),
             profile_hash,
+            corrections: corrections.map(|(c, _)| c),
         })
     }
 
@@ -315,6 +337,9 @@ impl World {
             "tasks": self.benchmark.tasks.len(),
             "hash": self.hash,
         });
+        if let Some(corrections) = &self.corrections {
+            summary["corrections"] = serde_json::json!(corrections.offsets());
+        }
         let couplings = &hand.couplings;
         if !couplings.overridden.is_empty() {
             summary["description_overrides"] = couplings
@@ -365,6 +390,16 @@ fn canonical_profile(text: &str) -> String {
         }
         Err(_) => text.to_string(),
     }
+}
+
+/// A hash and a corrections file's canonical text.
+fn with_corrections(hash: &str, text: &str) -> String {
+    let mut hasher = Sha256::new();
+    hasher.update(hash.as_bytes());
+    hasher.update([0]);
+    hasher.update(canonical(text).as_bytes());
+    let digest = hasher.finalize();
+    digest.iter().take(8).map(|b| format!("{b:02x}")).collect()
 }
 
 /// The world's hash: its profile hash and the hand's files' content.

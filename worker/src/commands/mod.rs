@@ -5,6 +5,7 @@ mod bench_hold;
 pub mod certs;
 pub mod checkpoint;
 pub mod eval;
+pub mod fit_grasps;
 pub mod oracle;
 pub mod record;
 pub mod remote;

@@ -3,6 +3,8 @@
 //! authors' repository (`grasp_sim::import::dexmobile`), pointing at its files.
 //! `crm world init --hand FILE --out DIR`: draft a world for a hand from its description alone
 //! (`grasp_sim::init`) and print the guesses to confirm.
+//! `crm world fit-grasps WORLD --out DIR`: the world with its grasp locations fitted to its hand
+//! (`fit_grasps.rs`).
 
 use std::path::PathBuf;
 
@@ -25,6 +27,11 @@ pub enum WorldCommand {
     /// loaded back as `crm world check` loads it. Prints the world's line, then each guess
     /// to confirm. Nothing is written when the draft does not load.
     Init(InitArgs),
+    /// Fit the grasp locations of the tasks the scripted oracle fails to the hand: search an
+    /// offset per task within a box, judged by the oracle, rechecked on other seeds, and write
+    /// the corrected world (its `corrections.json`, a hash of its own) to `--out`. Prints the
+    /// table to stderr and the corrected world's line.
+    FitGrasps(super::fit_grasps::FitArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -82,6 +89,7 @@ fn world_hand_file(dir: &std::path::Path) -> String {
 
 pub fn run(command: WorldCommand) -> anyhow::Result<()> {
     match command {
+        WorldCommand::FitGrasps(args) => super::fit_grasps::run(args),
         WorldCommand::Check(args) => {
             let world = grasp_sim::World::load(&args.dir)?;
             let (conflicts, needless) = world.coupling_conflicts();

@@ -1,0 +1,193 @@
+//! `crm world fit-grasps WORLD --out DIR`: fit a world's grasp locations to its hand
+//! ([`crm_run::fit`]) and write the corrected world as a world of its own: the source
+//! folder's files, its `world.json` naming `corrections.json` (the offsets, the box, the
+//! seeds, the oracle's success before and after, this command) and the source folder among
+//! its `assets`, so descriptions and meshes resolve as before. The source stays as it is.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use crm_run::fit::{FitOptions, TaskFit};
+use grasp_sim::corrections::{Corrections, TaskCorrection};
+use grasp_sim::{EnvSettings, World};
+
+use super::emit;
+
+#[derive(clap::Args, Debug)]
+pub struct FitArgs {
+    /// The world folder to fit (with `world.json`).
+    pub world: PathBuf,
+    /// The corrected world's folder; it must not exist, or be empty.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The corrected world's name (default: the source's with `-fitted`).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Search the tasks whose oracle success on the search seeds is under this.
+    #[arg(long, default_value_t = FitOptions::default().threshold)]
+    pub threshold: f64,
+    /// Half-width of the box of offsets searched, per axis (m, object frame).
+    #[arg(long, default_value_t = FitOptions::default().bounds[0])]
+    pub bounds: f32,
+    /// The search's first step and its finest (m).
+    #[arg(long, default_value_t = FitOptions::default().step)]
+    pub step: f32,
+    #[arg(long, default_value_t = FitOptions::default().min_step)]
+    pub min_step: f32,
+    /// Seeds judging each candidate: the first and how many.
+    #[arg(long, default_value_t = FitOptions::default().search_seeds[0])]
+    pub seed: u64,
+    #[arg(long, default_value_t = FitOptions::default().search_seeds[1])]
+    pub seeds: u64,
+    /// Seeds rechecking the best offset, which the search does not use: the first and how
+    /// many.
+    #[arg(long, default_value_t = FitOptions::default().check_seeds[0])]
+    pub check_seed: u64,
+    #[arg(long, default_value_t = FitOptions::default().check_seeds[1])]
+    pub check_seeds: u64,
+    /// Only this task (repeat for more); every task when absent.
+    #[arg(long = "task")]
+    pub tasks: Vec<String>,
+}
+
+/// The files of the source folder (not its subfolders), and its `world.json` rewritten.
+fn write_world(
+    source: &Path,
+    out: &Path,
+    name: &str,
+    corrections: &Corrections,
+) -> anyhow::Result<()> {
+    if out.exists()
+        && std::fs::read_dir(out)
+            .with_context(|| format!("--out: {}", out.display()))?
+            .next()
+            .is_some()
+    {
+        bail!("--out: {} is not empty", out.display());
+    }
+    let text = std::fs::read_to_string(source.join("world.json"))
+        .with_context(|| format!("reading {}", source.join("world.json").display()))?;
+    let mut world: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}", source.join("world.json").display()))?;
+    let absolute =
+        std::fs::canonicalize(source).with_context(|| format!("{}", source.display()))?;
+    // Earlier asset folders, made absolute, then the source folder itself.
+    let mut assets: Vec<serde_json::Value> = world["assets"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default()
+        .into_iter()
+        .filter_map(|a| {
+            a.as_str()
+                .map(|a| absolute.join(a).display().to_string().into())
+        })
+        .collect();
+    assets.push(absolute.display().to_string().into());
+    world["assets"] = serde_json::Value::Array(assets);
+    world["name"] = name.into();
+    world["corrections"] = "corrections.json".into();
+    std::fs::create_dir_all(out).with_context(|| format!("--out: {}", out.display()))?;
+    for entry in std::fs::read_dir(source)? {
+        let entry = entry?;
+        if entry.file_type()?.is_file() && entry.file_name() != "world.json" {
+            std::fs::copy(entry.path(), out.join(entry.file_name()))?;
+        }
+    }
+    std::fs::write(
+        out.join("corrections.json"),
+        serde_json::to_string_pretty(corrections)? + "\n",
+    )?;
+    std::fs::write(
+        out.join("world.json"),
+        serde_json::to_string_pretty(&world)? + "\n",
+    )?;
+    Ok(())
+}
+
+pub fn run(args: FitArgs) -> anyhow::Result<()> {
+    let world = World::load(&args.world)?;
+    if world.corrections.is_some() {
+        bail!(
+            "{}: the world already corrects its grasp locations; fit the world it was made from",
+            args.world.display()
+        );
+    }
+    for (flag, v) in [
+        ("--bounds", args.bounds),
+        ("--step", args.step),
+        ("--min-step", args.min_step),
+    ] {
+        if !(v.is_finite() && v > 0.0 && v <= 0.1) {
+            bail!("{flag}: {v} is not a length in (0, 0.1] m");
+        }
+    }
+    if args.seeds == 0 || args.check_seeds == 0 {
+        bail!("--seeds and --check-seeds: at least 1");
+    }
+    let options = FitOptions {
+        threshold: args.threshold,
+        bounds: [args.bounds; 3],
+        step: args.step,
+        min_step: args.min_step.min(args.step),
+        search_seeds: [args.seed, args.seeds],
+        check_seeds: [args.check_seed, args.check_seeds],
+        tasks: args.tasks.clone(),
+    };
+    let config = world.sim_config(&EnvSettings::default());
+    let machine = world.machine()?;
+    let fits = crm_run::fit::fit(&world.benchmark, &config, &machine, &options, |line| {
+        eprintln!("{line}")
+    })?;
+    let command = std::iter::once("crm".to_string())
+        .chain(std::env::args().skip(1))
+        .map(|a| crm_server::launcher::shell_quote(&a))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let improved: Vec<&TaskFit> = fits.iter().filter(|f| f.after > f.before).collect();
+    let corrections = Corrections {
+        command,
+        bounds: options.bounds,
+        threshold: options.threshold,
+        search_seeds: options.search_seeds,
+        check_seeds: options.check_seeds,
+        tasks: improved
+            .iter()
+            .map(|f| {
+                (
+                    f.task.clone(),
+                    TaskCorrection {
+                        offset: f.offset,
+                        before: f.before,
+                        after: f.after,
+                        before_check: f.before_check,
+                        after_check: f.after_check,
+                        evaluated: f.evaluated,
+                    },
+                )
+            })
+            .collect(),
+    };
+    let name = args
+        .name
+        .clone()
+        .unwrap_or_else(|| format!("{}-fitted", world.name));
+    write_world(&args.world, &args.out, &name, &corrections)?;
+    let fitted = World::load(&args.out)
+        .with_context(|| format!("the corrected world {} does not load", args.out.display()))?;
+    let mut text = String::from(
+        "| task | offset (m, object frame) | search seeds, before | after | check seeds, before | after |\n| --- | --- | --- | --- | --- | --- |\n",
+    );
+    for f in &fits {
+        let kept = if f.after > f.before {
+            ""
+        } else {
+            " (not improved: not written)"
+        };
+        text.push_str(&format!(
+            "| {} | {:?}{kept} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+            f.task, f.offset, f.before, f.after, f.before_check, f.after_check
+        ));
+    }
+    eprint!("{text}");
+    emit(&format!("{}\n", fitted.summary()))
+}
