@@ -199,3 +199,87 @@ fn an_imported_world_trains_and_its_checkpoint_evaluates_in_another_import() {
     assert!(stderr.contains("crm_ppo/topo/pos_all.csv"), "{stderr}");
     std::fs::remove_dir_all(root).ok();
 }
+
+/// `--corrections FILE` applies a fit's grasp-location corrections to an import: the task
+/// files stay the authors', the world is one of its own hash that lists what it corrects, and
+/// a correction of a task the world lacks is refused with nothing written.
+#[test]
+fn an_import_takes_corrections_as_data() {
+    let root = std::env::temp_dir().join(format!("crm-cli-import-fit-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let repo = standin(&root, "copy");
+    let plain = root.join("worlds/plain");
+    let (code, stdout, stderr) = crm(&[
+        "world",
+        "import-dexmobile",
+        utf8(&repo),
+        "--out",
+        utf8(&plain),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let plain_line: serde_json::Value = serde_json::from_str(stdout.trim()).expect("JSON");
+    let benchmark: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(plain.join("benchmark.json")).expect("benchmark"),
+    )
+    .expect("JSON");
+    let task = benchmark["tasks"][0]["id"]
+        .as_str()
+        .expect("a task")
+        .to_string();
+    let corrections = |id: &str| {
+        serde_json::json!({
+            "command": "crm world fit-grasps (written by the test)",
+            "bounds": [0.06, 0.06, 0.06], "threshold": 0.8,
+            "search_seeds": [0, 10], "check_seeds": [100, 10],
+            "tasks": {id: {"offset": [0.0, 0.01, -0.02], "before": 0.0, "after": 0.9,
+                           "before_check": 0.0, "after_check": 0.8, "evaluated": 40}},
+        })
+    };
+    let file = root.join("corrections.json");
+    std::fs::write(&file, corrections(&task).to_string()).expect("write");
+    let fitted = root.join("worlds/fitted");
+    let (code, stdout, stderr) = crm(&[
+        "world",
+        "import-dexmobile",
+        utf8(&repo),
+        "--out",
+        utf8(&fitted),
+        "--corrections",
+        utf8(&file),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let line: serde_json::Value = serde_json::from_str(stdout.trim()).expect("JSON");
+    assert_ne!(line["hash"], plain_line["hash"]);
+    assert_eq!(
+        std::fs::read_to_string(fitted.join("benchmark.json")).expect("benchmark"),
+        std::fs::read_to_string(plain.join("benchmark.json")).expect("benchmark"),
+        "the task files stay the authors'"
+    );
+    let (code, stdout, stderr) = crm(&["world", "check", utf8(&fitted)]);
+    assert_eq!(code, 0, "{stderr}");
+    let check: serde_json::Value = serde_json::from_str(stdout.trim()).expect("JSON");
+    assert_eq!(check["hash"], line["hash"]);
+    assert_eq!(
+        check["corrections"][&task],
+        serde_json::json!([0.0, 0.01, -0.02])
+    );
+
+    std::fs::write(&file, corrections("no-such-task").to_string()).expect("write");
+    let refused = root.join("worlds/refused");
+    let (code, _, stderr) = crm(&[
+        "world",
+        "import-dexmobile",
+        utf8(&repo),
+        "--out",
+        utf8(&refused),
+        "--corrections",
+        utf8(&file),
+    ]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("corrections") && stderr.contains("no-such-task"),
+        "{stderr}"
+    );
+    assert!(!refused.exists());
+    std::fs::remove_dir_all(root).ok();
+}

@@ -76,6 +76,11 @@ pub struct ImportArgs {
     /// setting, docs/WORLDS.md) or `free` (the default). A world of its own hash.
     #[arg(long, value_parser = ["free", "authors"])]
     pub approach: Option<String>,
+    /// Grasp-location corrections to apply (a `corrections.json` of `crm world fit-grasps`,
+    /// e.g. the project's `worlds/dexmobile-corrections.json`): the import is then a world of
+    /// its own hash, its task files still the authors'.
+    #[arg(long, value_name = "FILE")]
+    pub corrections: Option<PathBuf>,
 }
 
 /// The profile file a world folder names (`world.json`'s `hand`), for messages.
@@ -114,9 +119,20 @@ pub fn run(command: WorldCommand) -> anyhow::Result<()> {
             emit(&format!("{}\n", world.summary()))
         }
         WorldCommand::ImportDexmobile(args) => {
+            let corrections = match &args.corrections {
+                Some(path) => {
+                    let text = std::fs::read_to_string(path)
+                        .map_err(|e| anyhow::anyhow!("--corrections: {}: {e}", path.display()))?;
+                    serde_json::from_str::<grasp_sim::corrections::Corrections>(&text)
+                        .map_err(|e| anyhow::anyhow!("--corrections: {}: {e}", path.display()))?;
+                    Some(text)
+                }
+                None => None,
+            };
             let options = grasp_sim::import::dexmobile::Options {
                 name: args.name,
                 without: args.without,
+                corrections,
                 approach: match args.approach.as_deref() {
                     Some("authors") => Some(grasp_sim::Approach::Authors),
                     Some(_) => Some(grasp_sim::Approach::Free),

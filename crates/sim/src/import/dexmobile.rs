@@ -46,6 +46,9 @@ pub struct Options {
     /// The approach geometry (`world.json` `approach`; free when absent): the authors' arm
     /// is [`crate::config::Approach::Authors`].
     pub approach: Option<crate::config::Approach>,
+    /// Corrections to the tasks' grasp locations (`crm world fit-grasps`' `corrections.json`,
+    /// the text), written beside the import and named in its `world.json`.
+    pub corrections: Option<String>,
 }
 
 impl Default for Options {
@@ -54,6 +57,7 @@ impl Default for Options {
             name: "dexmobile".into(),
             without: Vec::new(),
             approach: None,
+            corrections: None,
         }
     }
 }
@@ -496,6 +500,14 @@ pub fn import(repo: &Path, out: &Path, options: &Options) -> Result<Imported> {
         }
         if let Some(approach) = options.approach {
             world["approach"] = json!(approach);
+        }
+        if let Some(text) = &options.corrections {
+            let path = staging.join("corrections.json");
+            std::fs::write(&path, text).map_err(|error| crate::error::Error::Io {
+                path: path.display().to_string(),
+                error,
+            })?;
+            world["corrections"] = json!("corrections.json");
         }
         write_json(&staging.join("world.json"), &world)?;
         write_json(&staging.join("hand.json"), &profile)?;
