@@ -1,7 +1,8 @@
 //! `crm world import-dexmobile` through the binary, on a stand-in of the authors' repository
 //! (`scripts/make-dexmobile-standin`): the import, the oracle and two training iterations in
 //! the world it writes, the checkpoint evaluated in a second import of another copy (same
-//! hash), and exit code 2 naming the file, line and column of a bad CSV value.
+//! hash), exit code 2 naming the file, line and column of a bad CSV value, and a fit's
+//! corrections applied to an import as data.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
