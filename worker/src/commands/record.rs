@@ -34,8 +34,10 @@ pub struct RecordArgs {
     /// Write a video of the episodes here: `.mp4` (H.264, through ffmpeg) or `.gif`.
     #[arg(long, value_name = "FILE")]
     pub video: Option<PathBuf>,
-    /// Episodes to record, one after another (seeds SEED, SEED+1, ...).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    /// Episodes to record, one after another, drawn from `--seed` as `crm eval` draws them
+    /// (at most 50: a video's frames are held in memory until it is written, 230 kB each at
+    /// 320 x 240).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=50))]
     pub episodes: u64,
     /// The video's frame size, WIDTHxHEIGHT.
     #[arg(long, default_value = "320x240", value_parser = crate::video::parse_size)]
