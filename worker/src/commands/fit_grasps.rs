@@ -2,7 +2,8 @@
 //! ([`crm_run::fit`]) and write the corrected world as a world of its own: the source
 //! folder's files, its `world.json` naming `corrections.json` (the offsets, the box, the
 //! seeds, the oracle's success before and after, this command) and the source folder among
-//! its `assets`, so descriptions and meshes resolve as before. The source stays as it is.
+//! its `assets` (relative to the new folder), so descriptions and meshes resolve as before.
+//! The source stays as it is.
 
 use std::path::{Path, PathBuf};
 
@@ -71,7 +72,11 @@ fn write_world(
         .with_context(|| format!("{}", source.join("world.json").display()))?;
     let absolute =
         std::fs::canonicalize(source).with_context(|| format!("{}", source.display()))?;
-    // Earlier asset folders, made absolute, then the source folder itself.
+    std::fs::create_dir_all(out).with_context(|| format!("--out: {}", out.display()))?;
+    let out_absolute =
+        std::fs::canonicalize(out).with_context(|| format!("--out: {}", out.display()))?;
+    // Earlier asset folders, then the source folder itself, each relative to the new folder
+    // (so the two can move together), as `world.json` allows.
     let mut assets: Vec<serde_json::Value> = world["assets"]
         .as_array()
         .cloned()
@@ -79,14 +84,13 @@ fn write_world(
         .into_iter()
         .filter_map(|a| {
             a.as_str()
-                .map(|a| absolute.join(a).display().to_string().into())
+                .map(|a| relative(&absolute.join(a), &out_absolute).into())
         })
         .collect();
-    assets.push(absolute.display().to_string().into());
+    assets.push(relative(&absolute, &out_absolute).into());
     world["assets"] = serde_json::Value::Array(assets);
     world["name"] = name.into();
     world["corrections"] = "corrections.json".into();
-    std::fs::create_dir_all(out).with_context(|| format!("--out: {}", out.display()))?;
     for entry in std::fs::read_dir(source)? {
         let entry = entry?;
         if entry.file_type()?.is_file() && entry.file_name() != "world.json" {
@@ -102,6 +106,25 @@ fn write_world(
         serde_json::to_string_pretty(&world)? + "\n",
     )?;
     Ok(())
+}
+
+/// `path` from folder `from` (both absolute): `../../worlds/x`.
+fn relative(path: &Path, from: &Path) -> String {
+    let path: Vec<_> = path.components().collect();
+    let from: Vec<_> = from.components().collect();
+    let common = path.iter().zip(&from).take_while(|(a, b)| a == b).count();
+    let mut out = PathBuf::new();
+    for _ in common..from.len() {
+        out.push("..");
+    }
+    for part in &path[common..] {
+        out.push(part);
+    }
+    if out.as_os_str().is_empty() {
+        ".".into()
+    } else {
+        out.display().to_string()
+    }
 }
 
 pub fn run(args: FitArgs) -> anyhow::Result<()> {
@@ -190,4 +213,21 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
     }
     eprint!("{text}");
     emit(&format!("{}\n", fitted.summary()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_folder_is_named_from_another_by_the_shortest_relative_path() {
+        let at = |p: &str| PathBuf::from(p);
+        assert_eq!(relative(&at("/a/worlds/x"), &at("/a/worlds/y")), "../x");
+        assert_eq!(relative(&at("/a/b"), &at("/a/b")), ".");
+        assert_eq!(
+            relative(&at("/root/dex"), &at("/tmp/w/fit")),
+            "../../../root/dex"
+        );
+        assert_eq!(relative(&at("/a/b/c"), &at("/a")), "b/c");
+    }
 }
