@@ -397,6 +397,40 @@ fn fit_grasps_corrects_a_task_broken_on_purpose() {
         std::fs::read_to_string(&benchmark_path).expect("read"),
         source
     );
+    // A policy trained in the corrected world runs in the world as written: corrections move
+    // grasp locations, not what an observation or an action means. Its lineage names the
+    // corrected world's hash.
+    let trained = root.join("trained");
+    train_two_iterations(&root, &out, &trained);
+    let checkpoint = trained.join("crm-ppo.safetensors");
+    let (code, _, stderr) = crm(
+        &root,
+        &[
+            "eval",
+            "--world",
+            world.to_str().expect("utf-8"),
+            "--checkpoint",
+            checkpoint.to_str().expect("utf-8"),
+            "--episodes",
+            "2",
+            "--json",
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let (code, shown, stderr) = crm(
+        &root,
+        &["checkpoint", "show", checkpoint.to_str().expect("utf-8")],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    // The header: the policy hash, the world as written's; the lineage: the corrected world's.
+    assert!(
+        shown.contains(before["hash"].as_str().expect("hash")),
+        "{shown}"
+    );
+    assert!(
+        shown.contains(&checked["hash"].as_str().expect("hash")[..12]),
+        "{shown}"
+    );
     // A fitted world is not fitted again; a non-empty --out is refused.
     let (code, _, stderr) = crm(
         &root,

@@ -21,7 +21,7 @@ pub fn check_world(
     static BUILTIN: std::sync::OnceLock<String> = std::sync::OnceLock::new();
     let builtin = BUILTIN.get_or_init(|| grasp_sim::World::builtin().profile_hash);
     let hash = header.world_hash.as_deref().unwrap_or(builtin);
-    if hash != world.hash && hash != world.profile_hash {
+    if hash != world.hash && hash != world.policy_hash && hash != world.profile_hash {
         return Err(invalid!(
             "checkpoint {} was trained in world {:?} (hash {hash}), this is world {:?} (hash {}): \
              the hand profile, the CRM spec, the sensors or the hand's files differ, so its \

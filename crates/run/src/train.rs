@@ -77,8 +77,9 @@ pub struct Trainer {
     last_100: EarlyStop,
     layout: Layout,
     spec_hash: String,
-    /// The world's name and hash, written into checkpoints.
-    world: (String, String),
+    /// The world's name, its hash (the lineage's: a corrected world's corrections in it) and
+    /// its policy hash (the header's, what a checkpoint's compatibility is checked on).
+    world: (String, String, String),
     stage_names: Vec<String>,
     started: Instant,
     start_steps: u64,
@@ -275,7 +276,11 @@ impl Trainer {
             learner,
             layout,
             spec_hash,
-            world: (env.world()?.name.clone(), env.world()?.hash.clone()),
+            world: (
+                env.world()?.name.clone(),
+                env.world()?.hash.clone(),
+                env.world()?.policy_hash.clone(),
+            ),
             stage_names,
             started: Instant::now(),
             lineage,
@@ -577,7 +582,7 @@ impl Trainer {
             // `Checkpoint::save_sac` writes CRM-SAC's.
             activation: None,
             world: Some(self.world.0.clone()),
-            world_hash: Some(self.world.1.clone()),
+            world_hash: Some(self.world.2.clone()),
             lineage: self.lineage()?,
             state: None,
         };

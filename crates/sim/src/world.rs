@@ -116,6 +116,11 @@ pub struct World {
     pub hash: String,
     /// What the world corrects in its tasks' grasp locations, if anything.
     pub corrections: Option<Corrections>,
+    /// [`World::hash`] without the corrections: what shapes a policy's observation and action
+    /// (the same as `hash` for a world that corrects nothing). Checkpoints record it, so a
+    /// policy trained in a corrected world runs in the world as imported and the other way
+    /// round.
+    pub policy_hash: String,
     /// The hash of the profile, the spec and the sensors alone: what checkpoints recorded
     /// before the hand's files were in [`World::hash`]. A checkpoint that recorded it is
     /// accepted where the three match.
@@ -137,6 +142,7 @@ impl World {
             &mut content,
             crate::hand::builtin::DESCRIPTION.as_bytes(),
         );
+        let hash = with_content(&profile_hash, &content.finalize().into());
         Self {
             name: "crm".into(),
             dir: None,
@@ -145,7 +151,8 @@ impl World {
             spec: None,
             randomization: None,
             approach: Approach::Free,
-            hash: with_content(&profile_hash, &content.finalize().into()),
+            hash: hash.clone(),
+            policy_hash: hash,
             profile_hash,
             corrections: None,
         }
@@ -290,10 +297,14 @@ impl World {
             }
             None => None,
         };
-        let mut profile_hash = world_hash(&profile_text, &spec_text, &without, approach);
-        if let Some((_, text)) = &corrections {
-            profile_hash = with_corrections(&profile_hash, text);
-        }
+        let profile_hash = world_hash(&profile_text, &spec_text, &without, approach);
+        let policy_hash = with_content(&profile_hash, &description.content);
+        let hash = match &corrections {
+            Some((_, text)) => {
+                with_content(&with_corrections(&profile_hash, text), &description.content)
+            }
+            None => policy_hash.clone(),
+        };
         if let Some(randomization) = &file.randomization
             && [
                 randomization.position,
@@ -316,7 +327,8 @@ impl World {
             spec,
             randomization: file.randomization,
             approach,
-            hash: with_content(&profile_hash, &description.content),
+            hash,
+            policy_hash,
             profile_hash,
             corrections: corrections.map(|(c, _)| c),
         })

@@ -59,7 +59,7 @@ pub fn check(description: &Description, profile: &Profile, model: &HandModel) ->
             .and_then(|d| description.joints[d].mimic.clone())
     };
     let mut found = Vec::new();
-    let names = ["thumb", "index", "middle", "ring", "little"];
+    let names = crate::view::FINGERS;
     for (f, finger) in profile.fingers.all().into_iter().enumerate() {
         let Some(finger) = finger else {
             continue;
