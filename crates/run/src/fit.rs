@@ -5,16 +5,17 @@
 //! give grasp locations for the hand they were recorded with; this moves them to where this
 //! hand's grasp holds, as data ([`grasp_sim::corrections`]), never as code for one task.
 //!
-//! The search: where the task fails on every search seed, a coarse grid over the box (its
-//! centre and the half-way and edge points per axis) finds ground to climb; then a pattern
-//! search from the best point so far steps along each axis (both signs) while one improves
-//! the success, halving the step when none does, down to the finest step. Ties keep the
-//! smaller offset. Deterministic: the same world, options and seeds give the same offsets.
+//! The search: a pattern search from the uncorrected location steps along each axis (both
+//! signs) while one improves the success, halving the step when none does, down to the
+//! finest step. Where the task fails on every search seed, or that climb finds nothing
+//! better, a coarse grid over the box (its centre and the half-way and edge points per axis)
+//! finds ground to climb from instead. Ties keep the smaller offset. Deterministic: the same world, options and seeds give the same offsets.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use grasp_sim::benchmark::Benchmark;
+use grasp_sim::corrections::TaskCorrection;
 use grasp_sim::{GraspEnv, SimConfig};
 use rayon::prelude::*;
 
@@ -55,17 +56,9 @@ impl Default for FitOptions {
     }
 }
 
-/// One task's outcome.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TaskFit {
-    pub task: String,
-    pub offset: [f32; 3],
-    pub before: f64,
-    pub after: f64,
-    pub before_check: f64,
-    pub after_check: f64,
-    pub evaluated: usize,
-}
+/// One task's outcome: its id and the offset found, with the oracle's success around it
+/// (a [`TaskCorrection`], written as one where it improves on the uncorrected location).
+pub type TaskFit = (String, TaskCorrection);
 
 /// The oracle's success on `task` with its grasp location moved by `offset`, over `seeds`.
 fn success(
@@ -92,6 +85,85 @@ fn success(
         .into_iter()
         .sum::<usize>();
     Ok(wins as f64 / seeds[1].max(1) as f64)
+}
+
+/// Whether success `s` at offset `o` beats `best` at `at`: higher, or as high and smaller.
+fn better(s: f64, o: [f32; 3], best: f64, at: [f32; 3]) -> bool {
+    s > best + 1e-12 || ((s - best).abs() <= 1e-12 && norm(o) < norm(at) - 1e-12)
+}
+
+/// The best offset and its success, from the uncorrected location's success `before`: a
+/// climb from there; where the task fails on every seed, or that climb finds nothing
+/// better, the coarse grid finds ground to climb from instead.
+fn search(
+    judge: &mut impl FnMut([f32; 3]) -> Result<f64>,
+    options: &FitOptions,
+    before: f64,
+) -> Result<(f64, [f32; 3])> {
+    let mut found = (before, [0.0f32; 3]);
+    if before > 0.0 {
+        found = climb(judge, options, found)?;
+    }
+    if found.0 <= before {
+        let start = grid(judge, options, found)?;
+        found = climb(judge, options, start)?;
+    }
+    Ok(found)
+}
+
+/// The best of `from` and a coarse grid over the box: its centre and the half-way and edge
+/// points per axis (125 offsets).
+fn grid(
+    judge: &mut impl FnMut([f32; 3]) -> Result<f64>,
+    options: &FitOptions,
+    from: (f64, [f32; 3]),
+) -> Result<(f64, [f32; 3])> {
+    let (mut best, mut at) = from;
+    let points = |b: f32| [-b, -b / 2.0, 0.0, b / 2.0, b];
+    for x in points(options.bounds[0]) {
+        for y in points(options.bounds[1]) {
+            for z in points(options.bounds[2]) {
+                let o = [x, y, z];
+                let s = judge(o)?;
+                if better(s, o, best, at) && s > 0.0 {
+                    (best, at) = (s, o);
+                }
+            }
+        }
+    }
+    Ok((best, at))
+}
+
+/// The pattern search from `from`: a step along each axis (both signs) while one improves
+/// the success, the step halved when none does, down to the finest.
+fn climb(
+    judge: &mut impl FnMut([f32; 3]) -> Result<f64>,
+    options: &FitOptions,
+    from: (f64, [f32; 3]),
+) -> Result<(f64, [f32; 3])> {
+    let (mut best, mut at) = from;
+    let mut step = options.step;
+    while step >= options.min_step - 1e-9 && best < 1.0 {
+        let mut moved = false;
+        for axis in 0..3 {
+            for sign in [1.0f32, -1.0] {
+                let mut o = at;
+                o[axis] += sign * step;
+                if o[axis].abs() > options.bounds[axis] + 1e-6 {
+                    continue;
+                }
+                let s = judge(o)?;
+                if s > best + 1e-12 {
+                    (best, at) = (s, o);
+                    moved = true;
+                }
+            }
+        }
+        if !moved {
+            step /= 2.0;
+        }
+    }
+    Ok((best, at))
 }
 
 fn key(offset: [f32; 3]) -> [i64; 3] {
@@ -151,45 +223,7 @@ pub fn fit(
             seen.insert(key(offset), s);
             Ok(s)
         };
-        let better = |s: f64, o: [f32; 3], best: f64, at: [f32; 3]| {
-            s > best + 1e-12 || ((s - best).abs() <= 1e-12 && norm(o) < norm(at) - 1e-12)
-        };
-        let (mut best, mut at) = (before, [0.0f32; 3]);
-        if before == 0.0 {
-            let points = |b: f32| [-b, -b / 2.0, 0.0, b / 2.0, b];
-            for x in points(options.bounds[0]) {
-                for y in points(options.bounds[1]) {
-                    for z in points(options.bounds[2]) {
-                        let o = [x, y, z];
-                        let s = judge(o)?;
-                        if better(s, o, best, at) && s > 0.0 {
-                            (best, at) = (s, o);
-                        }
-                    }
-                }
-            }
-        }
-        let mut step = options.step;
-        while step >= options.min_step - 1e-9 && best < 1.0 {
-            let mut moved = false;
-            for axis in 0..3 {
-                for sign in [1.0f32, -1.0] {
-                    let mut o = at;
-                    o[axis] += sign * step;
-                    if o[axis].abs() > options.bounds[axis] + 1e-6 {
-                        continue;
-                    }
-                    let s = judge(o)?;
-                    if s > best + 1e-12 {
-                        (best, at) = (s, o);
-                        moved = true;
-                    }
-                }
-            }
-            if !moved {
-                step /= 2.0;
-            }
-        }
+        let (best, at) = search(&mut judge, options, before)?;
         let at = at.map(|v| (v * 1e4).round() / 1e4);
         let before_check = success(
             benchmark,
@@ -205,15 +239,68 @@ pub fn fit(
              {after_check:.2} on the check seeds, offset {at:?} ({} offsets judged)",
             seen.len()
         ));
-        fits.push(TaskFit {
-            task: id,
-            offset: at,
-            before,
-            after: best,
-            before_check,
-            after_check,
-            evaluated: seen.len(),
-        });
+        fits.push((
+            id,
+            TaskCorrection {
+                offset: at,
+                before,
+                after: best,
+                before_check,
+                after_check,
+                evaluated: seen.len(),
+            },
+        ));
     }
     Ok(fits)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn distance(a: [f32; 3], b: [f32; 3]) -> f32 {
+        norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]).sqrt()
+    }
+
+    /// A task whose uncorrected location passes 0.4, every nearby offset less, and whose
+    /// hold lies on the grid at (3, -3, 0) cm: the climb alone stays put, the grid finds it.
+    fn island(o: [f32; 3]) -> Result<f64> {
+        let d = distance(o, [0.03, -0.03, 0.0]);
+        Ok(if d < 0.012 {
+            1.0
+        } else if norm(o) < 1e-12 {
+            0.4
+        } else {
+            0.1
+        })
+    }
+
+    #[test]
+    fn a_climb_that_finds_nothing_restarts_from_the_grid() {
+        let options = FitOptions::default();
+        let mut judged = 0;
+        let mut judge = |o: [f32; 3]| {
+            judged += 1;
+            island(o)
+        };
+        let (best, at) = search(&mut judge, &options, 0.4).expect("search");
+        assert_eq!(best, 1.0);
+        assert!(distance(at, [0.03, -0.03, 0.0]) < 0.012, "{at:?}");
+        // The climb's 6 neighbours at each of 3 steps, then the 125 grid points.
+        assert!(judged >= 125, "{judged}");
+    }
+
+    #[test]
+    fn a_climb_that_improves_skips_the_grid() {
+        let options = FitOptions::default();
+        let mut judged = 0;
+        // Success rises toward (2, 0, 0) cm from 0.5 at the uncorrected location.
+        let mut judge = |o: [f32; 3]| {
+            judged += 1;
+            Ok(f64::from(1.0 - 10.0 * distance(o, [0.02, 0.0, 0.0])).max(0.0))
+        };
+        let (best, at) = search(&mut judge, &options, 0.8).expect("search");
+        assert!((best - 1.0).abs() < 1e-6 && distance(at, [0.02, 0.0, 0.0]) < 1e-6);
+        assert!(judged < 20, "{judged}");
+    }
 }

@@ -2,7 +2,9 @@
 //! world init` drafts from those couplings (a thumb whose two other joints follow its first, a
 //! finger led by its first joint), and a profile that couples, commands or holds a coupled
 //! joint otherwise is reported naming the joint and both couplings unless it overrides it by
-//! name, which leaves the world's hash as it is.
+//! name, which leaves the world's hash as it is. The draft names the fingers by their tips'
+//! row, so a little finger on a metacarpal that starts low in the palm (as the Shadow hand's)
+//! is still the little one.
 
 use std::path::{Path, PathBuf};
 
@@ -241,6 +243,60 @@ fn a_profile_against_the_descriptions_couplings_is_reported_until_it_overrides_t
             && err.contains("thumb_ipp")
             && err.contains("thumb_ip"),
         "{err}"
+    );
+    std::fs::remove_dir_all(root).ok();
+}
+
+/// The coupled hand with its little finger on a metacarpal that starts low in the palm, near
+/// the thumb's end of the fingers' bases (as the Shadow hand's `LFJ5`), cupping about an axis
+/// across the palm: the fingers keep their names, the cupping joint is held.
+#[test]
+fn a_little_finger_on_a_low_metacarpal_is_still_the_little_one() {
+    let root = temp("metacarpal");
+    let hand = root.join("assets/coupled.xml");
+    std::fs::create_dir_all(hand.parent().expect("parent")).expect("assets");
+    let text = coupled_hand();
+    let little = r#"      <body name="little_proximal" pos="0.045 -0.03 -0.004">"#;
+    assert_eq!(text.matches(little).count(), 1);
+    let start = text.find(little).expect("the little finger");
+    let end = start + text[start..].find("\n      </body>\n").expect("its end") + 14;
+    let finger = text[start..end].replace(
+        r#"<body name="little_proximal" pos="0.045 -0.03 -0.004">"#,
+        r#"<body name="little_proximal" pos="0.065 0 0">"#,
+    );
+    let metacarpal = format!(
+        r#"      <body name="little_metacarpal" pos="-0.02 -0.03 -0.004">
+        <joint name="little_cup" type="hinge" axis="1 0 0" range="0 0.7"/>
+        <geom type="capsule" fromto="0 0 0 0.065 0 0" size="0.009" mass="0.03"/>
+{finger}
+      </body>"#
+    );
+    std::fs::write(
+        &hand,
+        format!("{}{}{}", &text[..start], metacarpal, &text[end..]),
+    )
+    .expect("write the hand");
+    let out = root.join("world");
+    let assets = Assets::parse(&root.join("assets").display().to_string());
+    let drafted = init_world(&hand, &out, None, None, &assets).expect("a draft");
+    let profile: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("hand.json")).expect("profile"))
+            .expect("JSON");
+    for name in ["index", "middle", "ring", "little"] {
+        assert_eq!(
+            profile["fingers"][name]["command"],
+            format!("{name}_mcp"),
+            "{name}: {}",
+            profile["fingers"]
+        );
+    }
+    assert!(
+        drafted
+            .notes
+            .iter()
+            .any(|n| n.starts_with("held at 0") && n.contains("little_cup")),
+        "{:?}",
+        drafted.notes
     );
     std::fs::remove_dir_all(root).ok();
 }

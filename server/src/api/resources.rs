@@ -126,11 +126,16 @@ async fn recording_json(state: &AppState, job: i64) -> Result<serde_json::Value,
         .recording(job)
         .await
         .map_err(|e| ApiError::store("recording", e))?;
-    Ok(row.map_or(serde_json::Value::Null, |r| {
+    Ok(with_download(row, format!("/api/v1/jobs/{job}/recording")))
+}
+
+/// A stored file's row as JSON with its download path, or null without a row.
+pub(super) fn with_download(row: Option<impl serde::Serialize>, path: String) -> serde_json::Value {
+    row.map_or(serde_json::Value::Null, |r| {
         let mut value = json!(r);
-        value["download"] = json!(format!("/api/v1/jobs/{job}/recording"));
+        value["download"] = json!(path);
         value
-    }))
+    })
 }
 
 /// `GET /api/v1/jobs/{id}/recording`: the job's rerun recording (`.rrd`), for `rerun FILE`

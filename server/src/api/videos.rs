@@ -4,13 +4,11 @@
 
 use std::sync::Arc;
 
+use super::error::{ApiError, parse_id};
+use crate::AppState;
 use axum::extract::{Path, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use serde_json::json;
-
-use super::error::{ApiError, parse_id};
-use crate::AppState;
 
 /// A job's video (size, episodes, frames, frame size, download path), or null.
 pub async fn video_json(state: &AppState, job: i64) -> Result<serde_json::Value, ApiError> {
@@ -19,11 +17,10 @@ pub async fn video_json(state: &AppState, job: i64) -> Result<serde_json::Value,
         .video(job)
         .await
         .map_err(|e| ApiError::store("video", e))?;
-    Ok(row.map_or(serde_json::Value::Null, |r| {
-        let mut value = json!(r);
-        value["download"] = json!(format!("/api/v1/jobs/{job}/video"));
-        value
-    }))
+    Ok(super::resources::with_download(
+        row,
+        format!("/api/v1/jobs/{job}/video"),
+    ))
 }
 
 /// `GET /api/v1/jobs/{id}/video`: the evaluation's video of its first episodes (GIF).

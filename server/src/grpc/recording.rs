@@ -43,23 +43,11 @@ impl CoordinatorService {
                 "the job's recording would pass {cap} bytes (max_recording_bytes)"
             )));
         }
-        let mut bytes = Vec::with_capacity(meta.size as usize);
-        while let Some(chunk) = stream.message().await? {
-            let Some(recording_chunk::Body::Data(data)) = chunk.body else {
-                return Err(ErrorKind::InvalidField.status("only data chunks after meta"));
-            };
-            if (bytes.len() + data.len()) as u64 > meta.size {
-                return Err(ErrorKind::InvalidField.status("more bytes than meta.size"));
-            }
-            bytes.extend_from_slice(&data);
-        }
-        if bytes.len() as u64 != meta.size {
-            return Err(ErrorKind::InvalidField.status(format!(
-                "got {} bytes, meta.size says {}",
-                bytes.len(),
-                meta.size
-            )));
-        }
+        let bytes = receive(&mut stream, meta.size, |chunk| match chunk.body {
+            Some(recording_chunk::Body::Data(data)) => Some(data),
+            _ => None,
+        })
+        .await?;
         let row = self
             .state
             .store
@@ -78,4 +66,28 @@ impl CoordinatorService {
             episodes: row.episodes as u32,
         }))
     }
+}
+
+/// Receives the data chunks that follow a stream's meta chunk (an upload of a recording or a
+/// video): exactly `size` bytes, each chunk's data taken by `data` (`None`: not a data chunk).
+pub(super) async fn receive<T>(
+    stream: &mut Streaming<T>,
+    size: u64,
+    data: impl Fn(T) -> Option<Vec<u8>>,
+) -> Result<Vec<u8>, Status> {
+    let mut bytes = Vec::with_capacity(size as usize);
+    while let Some(chunk) = stream.message().await? {
+        let Some(data) = data(chunk) else {
+            return Err(ErrorKind::InvalidField.status("only data chunks after meta"));
+        };
+        if (bytes.len() + data.len()) as u64 > size {
+            return Err(ErrorKind::InvalidField.status("more bytes than meta.size"));
+        }
+        bytes.extend_from_slice(&data);
+    }
+    if bytes.len() as u64 != size {
+        return Err(ErrorKind::InvalidField
+            .status(format!("got {} bytes, meta.size says {size}", bytes.len())));
+    }
+    Ok(bytes)
 }

@@ -39,23 +39,11 @@ impl CoordinatorService {
         if meta.episodes == 0 || meta.frames == 0 {
             return Err(ErrorKind::InvalidField.status("meta.episodes and meta.frames: at least 1"));
         }
-        let mut bytes = Vec::with_capacity(meta.size as usize);
-        while let Some(chunk) = stream.message().await? {
-            let Some(video_chunk::Body::Data(data)) = chunk.body else {
-                return Err(ErrorKind::InvalidField.status("only data chunks after meta"));
-            };
-            if (bytes.len() + data.len()) as u64 > meta.size {
-                return Err(ErrorKind::InvalidField.status("more bytes than meta.size"));
-            }
-            bytes.extend_from_slice(&data);
-        }
-        if bytes.len() as u64 != meta.size {
-            return Err(ErrorKind::InvalidField.status(format!(
-                "got {} bytes, meta.size says {}",
-                bytes.len(),
-                meta.size
-            )));
-        }
+        let bytes = super::recording::receive(&mut stream, meta.size, |chunk| match chunk.body {
+            Some(video_chunk::Body::Data(data)) => Some(data),
+            _ => None,
+        })
+        .await?;
         if !bytes.starts_with(b"GIF89a") && !bytes.starts_with(b"GIF87a") {
             return Err(ErrorKind::InvalidField.status("data: not a GIF"));
         }

@@ -8,8 +8,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use crm_run::fit::{FitOptions, TaskFit};
-use grasp_sim::corrections::{Corrections, TaskCorrection};
+use crm_run::fit::FitOptions;
+use grasp_sim::corrections::Corrections;
 use grasp_sim::{EnvSettings, World};
 
 use super::emit;
@@ -166,28 +166,16 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
         .map(|a| crm_server::launcher::shell_quote(&a))
         .collect::<Vec<_>>()
         .join(" ");
-    let improved: Vec<&TaskFit> = fits.iter().filter(|f| f.after > f.before).collect();
     let corrections = Corrections {
         command,
         bounds: options.bounds,
         threshold: options.threshold,
         search_seeds: options.search_seeds,
         check_seeds: options.check_seeds,
-        tasks: improved
+        tasks: fits
             .iter()
-            .map(|f| {
-                (
-                    f.task.clone(),
-                    TaskCorrection {
-                        offset: f.offset,
-                        before: f.before,
-                        after: f.after,
-                        before_check: f.before_check,
-                        after_check: f.after_check,
-                        evaluated: f.evaluated,
-                    },
-                )
-            })
+            .filter(|(_, f)| f.after > f.before)
+            .cloned()
             .collect(),
     };
     let name = args
@@ -200,7 +188,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
     let mut text = String::from(
         "| task | offset (m, object frame) | search seeds, before | after | check seeds, before | after |\n| --- | --- | --- | --- | --- | --- |\n",
     );
-    for f in &fits {
+    for (task, f) in &fits {
         let kept = if f.after > f.before {
             ""
         } else {
@@ -208,7 +196,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<()> {
         };
         text.push_str(&format!(
             "| {} | {:?}{kept} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
-            f.task, f.offset, f.before, f.after, f.before_check, f.after_check
+            task, f.offset, f.before, f.after, f.before_check, f.after_check
         ));
     }
     eprint!("{text}");

@@ -8,8 +8,9 @@
 //! joint whose axis is parallel (|cos| > 0.7) to its chain's last joint flexes, any other
 //! (spread, opposition) is held at 0; the thumb is the chain named so (`th`, `thumb`), else the
 //! one whose last joint turns about an axis the others do not share, else the chain farthest
-//! from the others; the other fingers, along their row from the end nearer the thumb, are
-//! index, middle, ring and little (a hand with three leaves `little` out). A finger's second flexion
+//! from the others; the other fingers, along the row of their tips from the end nearer the
+//! thumb, are index, middle, ring and little (a hand with three leaves `little` out; a little
+//! finger on a metacarpal that starts low in the palm stays last). A finger's second flexion
 //! joint is its command (the paper's PIP), the first follows at the paper's `mcp`, the third at
 //! `dip`; the thumb's first is its command (TMCP), its last follows at `ip`. The description's
 //! couplings come first: the joint a chain's other joints follow (URDF `<mimic>`, MJCF joint
@@ -36,6 +37,9 @@ pub struct Draft {
 struct Chain {
     joints: Vec<usize>,
     base: Vec3,
+    /// Where its last joint sits at rest: the fingertips' row, which a finger starting lower
+    /// in the palm (a little finger's metacarpal) keeps.
+    tip: Vec3,
 }
 
 /// Drafts a profile for `description` (named `file` in the profile). `palm` overrides the
@@ -128,6 +132,7 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
         if !joints.is_empty() {
             chains.push(Chain {
                 base: origin_of(joints[0]),
+                tip: origin_of(*joints.last().unwrap_or(&joints[0])),
                 joints,
             });
         }
@@ -201,20 +206,20 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
             }
         }
     };
-    // The fingers stand in a row: ordered along it from the end nearer the thumb.
+    // The fingers' tips stand in a row: ordered along it from the end nearer the thumb.
     let thumb_base = chains[thumb].base;
     let mut others: Vec<usize> = (0..chains.len()).filter(|&k| k != thumb).collect();
     let mut ends = (others[0], others[1]);
     for &a in &others {
         for &b in &others {
-            let far = (chains[ends.1].base - chains[ends.0].base).length();
-            if (chains[b].base - chains[a].base).length() > far {
+            let far = (chains[ends.1].tip - chains[ends.0].tip).length();
+            if (chains[b].tip - chains[a].tip).length() > far {
                 ends = (a, b);
             }
         }
     }
-    let row = (chains[ends.1].base - chains[ends.0].base).normalize_or_zero();
-    let at = |k: usize| chains[k].base.dot(row);
+    let row = (chains[ends.1].tip - chains[ends.0].tip).normalize_or_zero();
+    let at = |k: usize| chains[k].tip.dot(row);
     let thumb_at = thumb_base.dot(row);
     let from_first = (at(ends.0) - thumb_at).abs() <= (at(ends.1) - thumb_at).abs();
     others.sort_by(|&a, &b| {

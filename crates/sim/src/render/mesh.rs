@@ -146,17 +146,7 @@ fn tube(out: &mut Vec<Triangle>, a: [f32; 3], b: [f32; 3], radius: f32, caps: bo
                     add(scale(ring(k), phi.cos()), scale(dir, phi.sin() * radius)),
                 )
             };
-            for lat in 0..half {
-                for k in 0..SEGMENTS {
-                    quad(
-                        out,
-                        point(k, lat),
-                        point(k + 1, lat),
-                        point(k + 1, lat + 1),
-                        point(k, lat + 1),
-                    );
-                }
-            }
+            bands(out, half, point);
         }
     }
 }
@@ -171,7 +161,12 @@ fn ball(out: &mut Vec<Triangle>, radius: f32) {
             radius * phi.sin(),
         ]
     };
-    for lat in 0..RINGS {
+    bands(out, RINGS, point);
+}
+
+/// The quads between `rings` + 1 rings of [`SEGMENTS`] points each, `point(k, ring)`.
+fn bands(out: &mut Vec<Triangle>, rings: usize, point: impl Fn(usize, usize) -> [f32; 3]) {
+    for lat in 0..rings {
         for k in 0..SEGMENTS {
             quad(
                 out,
