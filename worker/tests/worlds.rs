@@ -431,6 +431,12 @@ fn fit_grasps_corrects_a_task_broken_on_purpose() {
         shown.contains(&checked["hash"].as_str().expect("hash")[..12]),
         "{shown}"
     );
+    // ... and the fit that made it: its command and the offsets.
+    assert!(
+        shown.contains("the world's grasp corrections, found by: crm world fit-grasps"),
+        "{shown}"
+    );
+    assert!(shown.contains("offsets: {\""), "{shown}");
     // A fitted world is not fitted again; a non-empty --out is refused.
     let (code, _, stderr) = crm(
         &root,

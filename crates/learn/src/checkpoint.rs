@@ -349,6 +349,7 @@ impl LineageStage {
             parent_sha256: None,
             world: parent.world.clone(),
             world_hash: parent.world_hash.clone(),
+            corrections: None,
             imitation: None,
             command: None,
             job: serde_json::json!({ "config": parent.config }),
@@ -400,6 +401,7 @@ mod tests {
             parent_sha256: parent,
             world: Some("crm".into()),
             world_hash: Some("f00d".into()),
+            corrections: None,
             imitation,
             command: Some(vec![
                 "crm".into(),

@@ -26,6 +26,10 @@ pub struct LineageStage {
     pub world: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub world_hash: Option<String>,
+    /// The world's grasp-location corrections, where it has them (`crm world fit-grasps`):
+    /// the command that found them and each corrected task's offset (m, object frame).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corrections: Option<serde_json::Value>,
     /// Behaviour cloning before the stage's reinforcement learning: the demonstrations'
     /// size and the settings it ran with.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -56,6 +60,13 @@ pub fn describe(lineage: &[LineageStage]) -> String {
             out.push_str(&format!(", world {world} ({})", short(hash)));
         }
         out.push('\n');
+        if let Some(corrections) = &stage.corrections {
+            let command = corrections["command"].as_str().unwrap_or("?");
+            out.push_str(&format!(
+                "   the world's grasp corrections, found by: {command}\n   offsets: {}\n",
+                corrections["offsets"]
+            ));
+        }
         if let Some(parent) = &stage.parent_sha256 {
             out.push_str(&format!("   from the checkpoint with sha256 {parent}\n"));
         }

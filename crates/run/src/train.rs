@@ -80,6 +80,8 @@ pub struct Trainer {
     /// The world's name, its hash (the lineage's: a corrected world's corrections in it) and
     /// its policy hash (the header's, what a checkpoint's compatibility is checked on).
     world: (String, String, String),
+    /// The world's grasp corrections for the lineage: the fit's command and the offsets.
+    corrections: Option<serde_json::Value>,
     stage_names: Vec<String>,
     started: Instant,
     start_steps: u64,
@@ -281,6 +283,11 @@ impl Trainer {
                 env.world()?.hash.clone(),
                 env.world()?.policy_hash.clone(),
             ),
+            corrections: env
+                .world()?
+                .corrections
+                .as_ref()
+                .map(|c| serde_json::json!({"command": c.command, "offsets": c.offsets()})),
             stage_names,
             started: Instant::now(),
             lineage,
@@ -346,6 +353,7 @@ impl Trainer {
             parent_sha256: self.parent_sha256.clone(),
             world: Some(self.world.0.clone()),
             world_hash: Some(self.world.1.clone()),
+            corrections: self.corrections.clone(),
             imitation: self.imitation.clone(),
             command: self.command.clone(),
             job: serde_json::to_value(&self.spec)?,
