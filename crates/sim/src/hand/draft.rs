@@ -206,19 +206,27 @@ pub fn draft(description: &Description, file: &str, palm: Option<&str>) -> Resul
             }
         }
     };
-    // The fingers' tips stand in a row: ordered along it from the end nearer the thumb.
+    // The fingers' tips stand in a row across the way the fingers point: ordered along it
+    // from the end nearer the thumb. (Across: a shorter finger, a finger on a metacarpal
+    // that starts low in the palm, and the thumb's place along the palm do not tilt it.)
     let thumb_base = chains[thumb].base;
     let mut others: Vec<usize> = (0..chains.len()).filter(|&k| k != thumb).collect();
+    let pointing = others
+        .iter()
+        .map(|&k| (chains[k].tip - chains[k].base).normalize_or_zero())
+        .sum::<Vec3>()
+        .normalize_or_zero();
+    let across = |v: Vec3| v - pointing * v.dot(pointing);
     let mut ends = (others[0], others[1]);
     for &a in &others {
         for &b in &others {
-            let far = (chains[ends.1].tip - chains[ends.0].tip).length();
-            if (chains[b].tip - chains[a].tip).length() > far {
+            let far = across(chains[ends.1].tip - chains[ends.0].tip).length();
+            if across(chains[b].tip - chains[a].tip).length() > far {
                 ends = (a, b);
             }
         }
     }
-    let row = (chains[ends.1].tip - chains[ends.0].tip).normalize_or_zero();
+    let row = across(chains[ends.1].tip - chains[ends.0].tip).normalize_or_zero();
     let at = |k: usize| chains[k].tip.dot(row);
     let thumb_at = thumb_base.dot(row);
     let from_first = (at(ends.0) - thumb_at).abs() <= (at(ends.1) - thumb_at).abs();
