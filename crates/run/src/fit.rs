@@ -9,7 +9,8 @@
 //! signs) while one improves the success, halving the step when none does, down to the
 //! finest step. Where the task fails on every search seed, or that climb finds nothing
 //! better, a coarse grid over the box (its centre and the half-way and edge points per axis)
-//! finds ground to climb from instead. Ties keep the smaller offset. Deterministic: the same world, options and seeds give the same offsets.
+//! finds ground to climb from instead. Ties keep the smaller offset. Deterministic: the same
+//! world, options and seeds give the same offsets.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
