@@ -309,6 +309,9 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
     assert!(text.contains("| ppo | deterministic | 2 |"), "{text}");
     assert!(text.contains("| ppo | 0."), "P(CRM-PPO > ppo) in {text}");
     assert!(text.contains("Ordering by IQM"), "{text}");
+    // The settings printed are those of the learners the study has: no SAC here.
+    assert!(text.contains("- PPO settings (crm-ppo, ppo): `"), "{text}");
+    assert!(!text.contains("SAC settings"), "{text}");
     // Other settings on the same study are refused, naming the setting.
     let mut other = study_args(&out, &data, "2");
     let steps = other.iter().position(|a| a == "--steps").expect("--steps") + 1;

@@ -95,6 +95,28 @@ fn section(text: &mut String, study: &Study, link: &str, reps: usize) {
     } else {
         f.tasks.join(", ")
     };
+    // The settings of the learners the study has: PPO's for the PPO family, SAC's for CRM-SAC.
+    let (ppo, sac): (Vec<&str>, Vec<&str>) = f
+        .algorithms
+        .iter()
+        .map(String::as_str)
+        .partition(|a| *a != "crm-sac");
+    let mut settings = String::new();
+    if !ppo.is_empty() {
+        let _ = writeln!(
+            settings,
+            "- PPO settings ({}): `{}`",
+            ppo.join(", "),
+            serde_json::to_string(&f.ppo).unwrap_or_default()
+        );
+    }
+    if !sac.is_empty() {
+        let _ = writeln!(
+            settings,
+            "- SAC settings (crm-sac): `{}`",
+            serde_json::to_string(&f.sac).unwrap_or_default()
+        );
+    }
     let _ = write!(
         text,
         "\n## {} (world `{}`)\n\n```\ncrm {}\n```\n\n\
@@ -102,7 +124,7 @@ fn section(text: &mut String, study: &Study, link: &str, reps: usize) {
          - budget: {} environment steps per run, or the early stop at {:.0}% success over the last {} training episodes (the paper's rule); {} environments{}\n\
          - tasks: {tasks}; randomization on; the paper's grasp protocol\n\
          - evaluation: {} episodes per final checkpoint on evaluation seed {}, sampled actions (the authors' `evaluate.py`) and the deterministic action\n\
-         - PPO settings (crm-ppo, ippo, lppo, ppo): `{}`\n- SAC settings (crm-sac): `{}`\n",
+         {settings}",
         f.name,
         f.world,
         f.command,
@@ -122,8 +144,6 @@ fn section(text: &mut String, study: &Study, link: &str, reps: usize) {
         )),
         f.episodes,
         f.eval_seed,
-        serde_json::to_string(&f.ppo).unwrap_or_default(),
-        serde_json::to_string(&f.sac).unwrap_or_default(),
     );
     if let Some(note) = &f.budget_note {
         let _ = writeln!(text, "- why this budget: {note}");
