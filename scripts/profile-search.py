@@ -3,7 +3,8 @@
 
 usage: scripts/profile-search.py WORLD OUT.jsonl --seconds S [--workers N] [--seeds K]
                                  [--held JOINT=LO:HI ...] [--box X0:X1,Y0:Y1,Z0:Z1]
-                                 [--torques T,T,...] [--topology NAME] [--keep-closed]
+                                 [--torques T,T,...] [--topology NAME [--per-finger]]
+                                 [--keep-closed]
 
 For each sample it writes a copy of WORLD's `hand.json` with the grasp point drawn from
 `--box` (palm frame, m), each `--held` joint drawn from its range, the motors' torque from
@@ -11,7 +12,8 @@ For each sample it writes a copy of WORLD's `hand.json` with the grasp point dra
 finger's range, runs `crm oracle --world COPY --json --seeds K`, and appends the sample and its
 success to OUT.jsonl (one JSON line each). With `--topology NAME` the sample is that topology's
 own (its `grasp_point`, `held` and `closed`; the torque stays the profile's) and the oracle runs
-that topology's tasks only; with `--keep-closed` the profile's closed commands stay (a world
+that topology's tasks only, and with `--per-finger` each of its fingers closes to a fraction of
+its own (a pinch's thumb and index apart); with `--keep-closed` the profile's closed commands stay (a world
 whose closing comes from its authors' data). The best line is a profile to try with more seeds.
 `crm` is the release build (`CARGO_TARGET_DIR`, else `target/`); the description is found as
 the world finds it (`CRM_ASSETS`). docs/WORLDS.md, "Bring your hand", has the Allegro search.
@@ -27,6 +29,8 @@ import subprocess
 import tempfile
 import time
 
+# How far the oracle closes a finger, as a fraction of its range.
+CLOSING = [0.6, 0.8, 1.0]
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -45,7 +49,7 @@ def span(text, name):
     return lo, hi
 
 
-def sample(rng, args):
+def sample(rng, args, fingers=()):
     box = [span(part, "--box") for part in args.box.split(",")]
     if len(box) != 3:
         raise SystemExit(f"--box: expected three LO:HI spans, got {args.box!r}")
@@ -53,7 +57,7 @@ def sample(rng, args):
         "grasp_point": [round(rng.uniform(*axis), 4) for axis in box],
         "held": {j: round(rng.uniform(*span(r, "--held")), 3) for j, r in args.held},
         "torque": rng.choice(args.torques),
-        "close": rng.choice([0.6, 0.8, 1.0]),
+        "close": {f: rng.choice(CLOSING) for f in fingers} if fingers else rng.choice(CLOSING),
     }
 
 
@@ -75,7 +79,8 @@ def profile(base, world_dir, p):
     for topology in shapes if p.get("close") else []:
         for finger in list(topology.get("closed", {})):
             lo, hi = hand["fingers"][finger]["range"]
-            topology["closed"][finger] = round(lo + p["close"] * (hi - lo) * 0.999, 3)
+            close = p["close"][finger] if isinstance(p["close"], dict) else p["close"]
+            topology["closed"][finger] = round(lo + close * (hi - lo) * 0.999, 3)
     return hand
 
 
@@ -92,7 +97,8 @@ def run(job):
     world_dir = os.path.abspath(args.world)
     world = json.load(open(os.path.join(world_dir, "world.json")))
     base = json.load(open(os.path.join(world_dir, world["hand"])))
-    p = sample(random.Random(index), args)
+    fingers = sorted(base["topologies"][args.topology]["closed"]) if args.topology and args.per_finger else ()
+    p = sample(random.Random(index), args, fingers)
     tasks = []
     if args.keep_closed:
         p.pop("close")
@@ -131,6 +137,8 @@ def main():
     parser.add_argument("--torques", default="0.2,0.35,0.5,0.7", help="motor torques to draw (N m)")
     parser.add_argument("--keep-closed", action="store_true", help="keep the profile's closed commands")
     parser.add_argument("--topology", help="search this topology's own grasp point, held joints and closing")
+    parser.add_argument("--per-finger", action="store_true",
+                        help="with --topology, draw each finger's closing on its own (a pinch's thumb and index)")
     args = parser.parse_args()
     try:
         args.torques = [float(t) for t in args.torques.split(",")]
@@ -144,6 +152,10 @@ def main():
         span(rng, "--held")
         held.append((joint, rng))
     args.held = held
+    if args.per_finger and not args.topology:
+        raise SystemExit("--per-finger: needs --topology (the closing drawn is that topology's)")
+    if args.per_finger and args.keep_closed:
+        raise SystemExit("--per-finger: draws the closing that --keep-closed keeps; give one of them")
     if args.topology:
         world = json.load(open(os.path.join(args.world, "world.json")))
         hand = json.load(open(os.path.join(args.world, world["hand"])))
