@@ -8,13 +8,14 @@ usage: scripts/profile-search.py WORLD OUT.jsonl --seconds S [--workers N] [--se
 
 For each sample it writes a copy of WORLD's `hand.json` with the grasp point drawn from
 `--box` (palm frame, m), each `--held` joint drawn from its range, the motors' torque from
-`--torques` (default {0.2, 0.35, 0.5, 0.7} N m) and every topology's closed commands at 60%, 80% or 100% of each
-finger's range, runs `crm oracle --world COPY --json --seeds K`, and appends the sample and its
-success to OUT.jsonl (one JSON line each). With `--topology NAME` the sample is that topology's
-own (its `grasp_point`, `held` and `closed`; the torque stays the profile's) and the oracle runs
-that topology's tasks only, and with `--per-finger` each of its fingers closes to a fraction of
-its own (a pinch's thumb and index apart); with `--keep-closed` the profile's closed commands stay (a world
-whose closing comes from its authors' data). The best line is a profile to try with more seeds.
+`--torques` (default {0.2, 0.35, 0.5, 0.7} N m) and every topology's closed commands at 60%,
+80% or 100% of each finger's range, runs `crm oracle --world COPY --json --seeds K`, and appends
+the sample and its success to OUT.jsonl (one JSON line each). With `--topology NAME` the sample
+is that topology's own (its `grasp_point`, `held` and `closed`; the torque stays the profile's)
+and the oracle runs that topology's tasks only, and with `--per-finger` each of its fingers
+closes to a fraction of its own (a pinch's thumb and index apart); with `--keep-closed` the
+profile's closed commands stay (a world whose closing comes from its authors' data). The best
+line is a profile to try with more seeds.
 `crm` is the release build (`CARGO_TARGET_DIR`, else `target/`); the description is found as
 the world finds it (`CRM_ASSETS`). docs/WORLDS.md, "Bring your hand", has the Allegro search.
 """
