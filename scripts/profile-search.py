@@ -3,8 +3,8 @@
 
 usage: scripts/profile-search.py WORLD OUT.jsonl --seconds S [--workers N] [--seeds K]
                                  [--held JOINT=LO:HI ...] [--box X0:X1,Y0:Y1,Z0:Z1]
-                                 [--torques T,T,...] [--topology NAME [--per-finger]]
-                                 [--keep-closed]
+                                 [--torques T,T,...] [--topology NAME [--per-finger]
+                                 [--preshape FINGER=LO:HI ...]] [--keep-closed]
 
 For each sample it writes a copy of WORLD's `hand.json` with the grasp point drawn from
 `--box` (palm frame, m), each `--held` joint drawn from its range, the motors' torque from
@@ -13,7 +13,9 @@ For each sample it writes a copy of WORLD's `hand.json` with the grasp point dra
 the sample and its success to OUT.jsonl (one JSON line each). With `--topology NAME` the sample
 is that topology's own (its `grasp_point`, `held` and `closed`; the torque stays the profile's)
 and the oracle runs that topology's tasks only, and with `--per-finger` each of its fingers
-closes to a fraction of its own (a pinch's thumb and index apart); with `--keep-closed` the
+closes to a fraction of its own (a pinch's thumb and index apart), and each `--preshape` finger
+starts its closing from a command drawn from its range (rad; a finger's closed command is
+never below it); with `--keep-closed` the
 profile's closed commands stay (a world whose closing comes from its authors' data). The best
 line is a profile to try with more seeds.
 `crm` is the release build (`CARGO_TARGET_DIR`, else `target/`); the description is found as
@@ -59,6 +61,7 @@ def sample(rng, args, fingers=()):
         "held": {j: round(rng.uniform(*span(r, "--held")), 3) for j, r in args.held},
         "torque": rng.choice(args.torques),
         "close": {f: rng.choice(CLOSING) for f in fingers} if fingers else rng.choice(CLOSING),
+        "preshape": {f: round(rng.uniform(*span(r, "--preshape")), 3) for f, r in args.preshape},
     }
 
 
@@ -71,6 +74,7 @@ def profile(base, world_dir, p):
         shape = hand["topologies"][p["topology"]]
         shape["grasp_point"] = p["grasp_point"]
         shape["held"] = {**shape.get("held", {}), **p["held"]}
+        shape["preshape"] = {**shape.get("preshape", {}), **p.get("preshape", {})}
         shapes = [shape]
     else:
         hand["grasp_point"] = p["grasp_point"]
@@ -82,6 +86,10 @@ def profile(base, world_dir, p):
             lo, hi = hand["fingers"][finger]["range"]
             close = p["close"][finger] if isinstance(p["close"], dict) else p["close"]
             topology["closed"][finger] = round(lo + close * (hi - lo) * 0.999, 3)
+    for topology in shapes:
+        for finger, start in topology.get("preshape", {}).items():
+            if finger in topology.get("closed", {}):
+                topology["closed"][finger] = max(topology["closed"][finger], start)
     return hand
 
 
@@ -103,6 +111,8 @@ def run(job):
     tasks = []
     if args.keep_closed:
         p.pop("close")
+    if not p["preshape"]:
+        p.pop("preshape")
     if args.topology:
         p["topology"] = args.topology
         p.pop("torque")
@@ -140,6 +150,8 @@ def main():
     parser.add_argument("--topology", help="search this topology's own grasp point, held joints and closing")
     parser.add_argument("--per-finger", action="store_true",
                         help="with --topology, draw each finger's closing on its own (a pinch's thumb and index)")
+    parser.add_argument("--preshape", action="append", default=[], metavar="FINGER=LO:HI",
+                        help="with --topology, draw this finger's preshape command (rad) from LO:HI")
     args = parser.parse_args()
     try:
         args.torques = [float(t) for t in args.torques.split(",")]
@@ -153,6 +165,14 @@ def main():
         span(rng, "--held")
         held.append((joint, rng))
     args.held = held
+    preshape = []
+    for item in args.preshape:
+        finger, _, rng = item.partition("=")
+        span(rng, "--preshape")
+        preshape.append((finger, rng))
+    args.preshape = preshape
+    if args.preshape and not args.topology:
+        raise SystemExit("--preshape: needs --topology (the preshape drawn is that topology's)")
     if args.per_finger and not args.topology:
         raise SystemExit("--per-finger: needs --topology (the closing drawn is that topology's)")
     if args.per_finger and args.keep_closed:
@@ -162,6 +182,9 @@ def main():
         hand = json.load(open(os.path.join(args.world, world["hand"])))
         if args.topology not in hand["topologies"]:
             raise SystemExit(f"--topology: {args.topology!r} is not one of {sorted(hand['topologies'])}")
+        unknown = [f for f, _ in args.preshape if f not in hand["fingers"]]
+        if unknown:
+            raise SystemExit(f"--preshape: {unknown[0]!r} is not one of the hand's fingers {sorted(hand['fingers'])}")
         if not any(t["topology"] == args.topology for t in benchmark_tasks(args.world, world)):
             raise SystemExit(f"--topology: the world has no task with topology {args.topology!r}")
     start = time.time()

@@ -100,7 +100,7 @@ fn section(text: &mut String, study: &Study, link: &str, reps: usize) {
         .algorithms
         .iter()
         .map(String::as_str)
-        .partition(|a| *a != "crm-sac");
+        .partition(|a| *a != crm_api::Algorithm::CrmSac.name());
     let mut settings = String::new();
     if !ppo.is_empty() {
         let _ = writeln!(
@@ -113,7 +113,8 @@ fn section(text: &mut String, study: &Study, link: &str, reps: usize) {
     if !sac.is_empty() {
         let _ = writeln!(
             settings,
-            "- SAC settings (crm-sac): `{}`",
+            "- SAC settings ({}): `{}`",
+            sac.join(", "),
             serde_json::to_string(&f.sac).unwrap_or_default()
         );
     }
