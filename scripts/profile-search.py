@@ -4,7 +4,7 @@
 usage: scripts/profile-search.py WORLD OUT.jsonl --seconds S [--workers N] [--seeds K]
                                  [--held JOINT=LO:HI ...] [--box X0:X1,Y0:Y1,Z0:Z1]
                                  [--torques T,T,...] [--topology NAME [--per-finger]
-                                 [--preshape FINGER=LO:HI ...]] [--keep-closed]
+                                 [--preshape FINGER=LO:HI ...] [--fit]] [--keep-closed]
 
 For each sample it writes a copy of WORLD's `hand.json` with the grasp point drawn from
 `--box` (palm frame, m), each `--held` joint drawn from its range, the motors' torque from
@@ -15,9 +15,11 @@ is that topology's own (its `grasp_point`, `held` and `closed`; the torque stays
 and the oracle runs that topology's tasks only, and with `--per-finger` each of its fingers
 closes to a fraction of its own (a pinch's thumb and index apart), and each `--preshape` finger
 starts its closing from a command drawn from its range (rad; a finger's closed command is
-never below it); with `--keep-closed` the
-profile's closed commands stay (a world whose closing comes from its authors' data). The best
-line is a profile to try with more seeds.
+never below it); with `--fit` each sample is judged after `crm world fit-grasps` has fitted
+the topology's tasks' grasp locations to it (`--seeds` seeds each, rechecked on as many from
+seed 200), for a shape that holds only a centimetre or more off the dataset's location, which
+the oracle alone scores 0; with `--keep-closed` the profile's closed commands stay (a world
+whose closing comes from its authors' data). The best line is a profile to try with more seeds.
 `crm` is the release build (`CARGO_TARGET_DIR`, else `target/`); the description is found as
 the world finds it (`CRM_ASSETS`). docs/WORLDS.md, "Bring your hand", has the Allegro search.
 """
@@ -27,6 +29,7 @@ import json
 import multiprocessing
 import os
 import random
+import re
 import shutil
 import subprocess
 import tempfile
@@ -101,6 +104,31 @@ def benchmark_tasks(world_dir, world):
     return json.load(open(path))["tasks"]
 
 
+# A line of `crm world fit-grasps`'s progress: a task kept, or a task searched.
+KEPT = re.compile(r"^(\S+): ([\d.]+) on the search seeds, kept")
+FITTED = re.compile(r"^(\S+): ([\d.]+) -> ([\d.]+) on the search seeds, ([\d.]+) -> ([\d.]+) on the check seeds")
+
+
+def fitted(scratch, tasks, seeds):
+    """Success per task after `crm world fit-grasps` on the world in `scratch`: on the search
+    seeds, and on the check seeds where the fit searched the task (None where it kept it)."""
+    out = os.path.join(scratch, "fitted")
+    done = subprocess.run(
+        [crm_binary(), "world", "fit-grasps", scratch, "--out", out, "--seeds", str(seeds),
+         "--check-seed", "200", "--check-seeds", str(seeds)]
+        + [arg for task in tasks for arg in ("--task", task)],
+        capture_output=True, text=True, timeout=3600)
+    if done.returncode != 0:
+        return None, done.stderr.strip()[-400:]
+    result = {}
+    for line in done.stderr.splitlines():
+        if m := KEPT.match(line):
+            result[m[1]] = {"search": float(m[2]), "check": None}
+        elif m := FITTED.match(line):
+            result[m[1]] = {"search": float(m[3]), "check": float(m[5])}
+    return result, None
+
+
 def run(job):
     index, args = job
     world_dir = os.path.abspath(args.world)
@@ -124,6 +152,13 @@ def run(job):
                 if os.path.isfile(source):
                     shutil.copy(source, scratch)
         json.dump(profile(base, world_dir, p), open(os.path.join(scratch, world["hand"]), "w"))
+        if args.fit:
+            result, error = fitted(scratch, tasks, args.seeds)
+            if error is not None:
+                return {"sample": index, "params": p, "error": error}
+            return {"sample": index, "params": p,
+                    "success": sum(r["search"] for r in result.values()) / max(len(result), 1),
+                    "fitted": result}
         done = subprocess.run(
             [crm_binary(), "oracle", "--world", scratch, "--json", "--seeds", str(args.seeds)]
             + [arg for task in tasks for arg in ("--task", task)],
@@ -152,6 +187,8 @@ def main():
                         help="with --topology, draw each finger's closing on its own (a pinch's thumb and index)")
     parser.add_argument("--preshape", action="append", default=[], metavar="FINGER=LO:HI",
                         help="with --topology, draw this finger's preshape command (rad) from LO:HI")
+    parser.add_argument("--fit", action="store_true",
+                        help="with --topology, judge each sample after fitting its tasks' grasp locations")
     args = parser.parse_args()
     try:
         args.torques = [float(t) for t in args.torques.split(",")]
@@ -173,6 +210,8 @@ def main():
     args.preshape = preshape
     if args.preshape and not args.topology:
         raise SystemExit("--preshape: needs --topology (the preshape drawn is that topology's)")
+    if args.fit and not args.topology:
+        raise SystemExit("--fit: needs --topology (the tasks fitted are that topology's)")
     if args.per_finger and not args.topology:
         raise SystemExit("--per-finger: needs --topology (the closing drawn is that topology's)")
     if args.per_finger and args.keep_closed:
