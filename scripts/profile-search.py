@@ -55,6 +55,16 @@ def span(text, name):
     return lo, hi
 
 
+def named_spans(items, name):
+    """`NAME=LO:HI` items as (NAME, "LO:HI") pairs, each span checked."""
+    pairs = []
+    for item in items:
+        key, _, text = item.partition("=")
+        span(text, name)
+        pairs.append((key, text))
+    return pairs
+
+
 def sample(rng, args, fingers=()):
     box = [span(part, "--box") for part in args.box.split(",")]
     if len(box) != 3:
@@ -196,18 +206,8 @@ def main():
         raise SystemExit(f"--torques: expected numbers separated by commas, got {args.torques!r}")
     if not args.torques or any(not t > 0 for t in args.torques):
         raise SystemExit(f"--torques: each torque must be positive, got {args.torques!r}")
-    held = []
-    for item in args.held:
-        joint, _, rng = item.partition("=")
-        span(rng, "--held")
-        held.append((joint, rng))
-    args.held = held
-    preshape = []
-    for item in args.preshape:
-        finger, _, rng = item.partition("=")
-        span(rng, "--preshape")
-        preshape.append((finger, rng))
-    args.preshape = preshape
+    args.held = named_spans(args.held, "--held")
+    args.preshape = named_spans(args.preshape, "--preshape")
     if args.preshape and not args.topology:
         raise SystemExit("--preshape: needs --topology (the preshape drawn is that topology's)")
     if args.fit and not args.topology:
