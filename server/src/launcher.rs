@@ -102,12 +102,13 @@ fn worker_binary() -> anyhow::Result<PathBuf> {
     Ok(if sibling.is_file() { sibling } else { me })
 }
 
-fn host_name() -> String {
+/// This host's name from `/etc/hostname`, if it has one (workers name themselves by it, and
+/// the launcher tells cluster workers to dial it).
+pub fn host_name() -> Option<String> {
     std::fs::read_to_string("/etc/hostname")
         .map(|s| s.trim().to_string())
         .ok()
         .filter(|s| !s.is_empty())
-        .unwrap_or_else(|| "localhost".into())
 }
 
 impl Launcher {
@@ -134,7 +135,7 @@ impl Launcher {
         let scheme = if tls { "https" } else { "http" };
         // Bound to every address: workers dial this host by name; else the address it is.
         let host = if grpc.ip().is_unspecified() {
-            host_name()
+            host_name().unwrap_or_else(|| "localhost".into())
         } else {
             grpc.ip().to_string()
         };

@@ -62,16 +62,8 @@ fn default_name() -> String {
     ) {
         (Some(array), Some(task), _) => format!("slurm-{array}_{task}"),
         (_, _, Some(job)) => format!("slurm-{job}"),
-        _ => host_name(),
+        _ => crm_server::launcher::host_name().unwrap_or_else(|| "worker".into()),
     }
-}
-
-fn host_name() -> String {
-    std::fs::read_to_string("/etc/hostname")
-        .map(|s| s.trim().to_string())
-        .ok()
-        .filter(|s| !s.is_empty())
-        .unwrap_or_else(|| "worker".into())
 }
 
 #[derive(clap::Args, Debug)]
