@@ -15,16 +15,28 @@ use clap::{Parser, Subcommand};
 /// (docs/BENCHMARKS.md, "Learning speed end to end"). With it, the count is one variable
 /// lookup; rayon's pool is the same size, and every product still runs on one thread
 /// (`crm_learn::kernels`), so results are bit for bit the same.
+///
+/// Sets `CANDLE_NUM_THREADS` to 1, unless it is set: candle splits an element-wise op of
+/// 65,536 elements or more (a 256-row minibatch through a 256-wide layer: CRM-SAC's update)
+/// over a pool of its own whose threads spin while they wait, against the environments'
+/// rayon threads. On one thread those ops run inline; each element is computed alone either
+/// way, so results are bit for bit the same, and CRM-SAC trains faster (docs/BENCHMARKS.md,
+/// "CRM-SAC's element-wise ops").
 fn name_thread_count() {
-    if std::env::var_os("RAYON_NUM_THREADS").is_some() {
-        return;
-    }
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    // SAFETY: called first thing in `main`, before any other thread exists, so nothing reads
-    // the environment while it changes.
-    #[allow(unsafe_code)]
-    unsafe {
-        std::env::set_var("RAYON_NUM_THREADS", threads.to_string());
+    for (name, value) in [
+        ("RAYON_NUM_THREADS", threads.to_string()),
+        ("CANDLE_NUM_THREADS", "1".to_string()),
+    ] {
+        if std::env::var_os(name).is_some() {
+            continue;
+        }
+        // SAFETY: called first thing in `main`, before any other thread exists, so nothing
+        // reads the environment while it changes.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var(name, value);
+        }
     }
 }
 
