@@ -149,6 +149,30 @@ impl Run {
             None => self.file.train_wall_s,
         }
     }
+
+    /// Training episodes ended, how many succeeded, and their mean length (control steps),
+    /// over the curve. An iteration redone after a resume (the same `steps` again) counts
+    /// once, as its last record.
+    pub fn training_episodes(&self) -> (u64, u64, f64) {
+        let mut by_steps = std::collections::BTreeMap::new();
+        for point in &self.curve {
+            by_steps.insert(point.steps, point);
+        }
+        let (mut episodes, mut successes, mut length) = (0, 0, 0.0);
+        for point in by_steps.values() {
+            episodes += point.episodes;
+            successes += point.successes;
+            if point.episodes > 0 && point.mean_episode_length.is_finite() {
+                length += point.mean_episode_length * point.episodes as f64;
+            }
+        }
+        let mean = if episodes > 0 {
+            length / episodes as f64
+        } else {
+            f64::NAN
+        };
+        (episodes, successes, mean)
+    }
 }
 
 /// A study folder with its finished runs.
@@ -397,5 +421,29 @@ mod tests {
             .find(|r| r.file.leases == 1)
             .expect("a one-lease run");
         assert_eq!(one.training_s(), one.curve.last().expect("points").wall_s);
+    }
+
+    #[test]
+    fn a_redone_iteration_counts_once_in_the_training_episodes() {
+        // The committed study: IPPO seed 3 never succeeded, every episode at the time limit.
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/builtin");
+        let study = Study::read(&dir).expect("the committed study");
+        let mut run = study
+            .runs_of("ippo")
+            .find(|r| r.file.seed == 3)
+            .expect("ippo seed 3")
+            .clone();
+        let (episodes, successes, length) = run.training_episodes();
+        assert_eq!(successes, 0);
+        assert_eq!(episodes, run.curve.iter().map(|p| p.episodes).sum::<u64>());
+        assert!((length - 600.0).abs() < 1.0, "{length}");
+        // A resumed run redoes the iterations after its checkpoint: the same steps recorded
+        // again, after the lease that was lost. The later record counts, once.
+        let mut redone = run.curve[10].clone();
+        redone.episodes += 5;
+        redone.successes += 2;
+        run.curve.push(redone);
+        let (again, succeeded, _) = run.training_episodes();
+        assert_eq!((again, succeeded), (episodes + 5, 2));
     }
 }

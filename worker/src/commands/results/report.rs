@@ -512,4 +512,26 @@ fn reading(text: &mut String, study: &Study, algorithms: &[&str], iqms: &[(Strin
             }
         );
     }
+    // Runs that almost never succeeded while training: what their evaluation can be read as.
+    let mut rare = Vec::new();
+    for a in algorithms {
+        for run in study.runs_of(a) {
+            let (episodes, successes, length) = run.training_episodes();
+            if episodes > 0 && (successes as f64) < 0.01 * episodes as f64 {
+                rare.push(format!(
+                    "{a} seed {} ({successes} of {episodes} training episodes, \
+                     {length:.0} control steps long on average)",
+                    run.file.seed
+                ));
+            }
+        }
+    }
+    if !rare.is_empty() {
+        let _ = writeln!(
+            text,
+            "- Runs that almost never succeeded while training (under 1% of their training \
+             episodes): {}.",
+            rare.join("; ")
+        );
+    }
 }
