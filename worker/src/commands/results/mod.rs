@@ -12,6 +12,7 @@
 
 mod paper;
 mod plot;
+mod reading;
 pub mod record;
 mod report;
 pub mod stats;
