@@ -10,6 +10,7 @@
 //! `--coordinator URL` the study runs on that coordinator's workers; without, a coordinator
 //! and local workers start in this process on `--data-dir`, as `crm up` does.
 
+mod extend;
 mod paper;
 mod plot;
 mod reading;
@@ -287,7 +288,7 @@ fn study(
     let path = dir.join("study.json");
     if path.exists() {
         let before = record::Study::read(&dir)?.file;
-        file = extend(&before, file, &path)?;
+        file = extend::extend(&before, file, &path)?;
     }
     record::write_json(&path, &file)?;
     eprintln!(
@@ -300,49 +301,6 @@ fn study(
         write_report(&args.out, args.reps)
     })?;
     write_report(&args.out, args.reps)
-}
-
-/// The study `asked` continuing `before` (the same settings; its seeds and algorithms joined
-/// to the earlier ones), or an error naming the first setting that differs.
-fn extend(
-    before: &record::StudyFile,
-    asked: record::StudyFile,
-    path: &std::path::Path,
-) -> anyhow::Result<record::StudyFile> {
-    let fields =
-        |f: &record::StudyFile| -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
-            let mut value = serde_json::to_value(f)?;
-            let map = value.as_object_mut().context("a study is an object")?;
-            for key in ["command", "seeds", "algorithms", "budget_note"] {
-                map.remove(key);
-            }
-            Ok(map.clone())
-        };
-    let (old, new) = (fields(before)?, fields(&asked)?);
-    if let Some((key, value)) = old.iter().find(|(k, v)| new.get(*k) != Some(*v)) {
-        bail!(
-            "{}: the study was run with {key} = {value}; this command asks {}: run it with the \
-             study's settings to continue it, or give another --name",
-            path.display(),
-            new.get(key).cloned().unwrap_or_default()
-        );
-    }
-    let mut seeds = before.seeds.clone();
-    seeds.extend(asked.seeds.iter().filter(|s| !before.seeds.contains(s)));
-    let mut algorithms = before.algorithms.clone();
-    algorithms.extend(
-        asked
-            .algorithms
-            .iter()
-            .filter(|a| !before.algorithms.contains(a))
-            .cloned(),
-    );
-    Ok(record::StudyFile {
-        seeds,
-        algorithms,
-        budget_note: asked.budget_note.clone().or(before.budget_note.clone()),
-        ..asked
-    })
 }
 
 /// Rebuilds `OUT/RESULTS.md` and every study's plots from the studies under `OUT/results/`.
