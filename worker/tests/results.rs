@@ -320,6 +320,59 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
     assert_eq!(refused.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert!(stderr.contains("steps = 4096"), "{stderr}");
+    // `--redo ppo` trains flat PPO's runs again (after a fix to it) and leaves CRM-PPO's
+    // alone; the study does not record the flag, so its command again redoes nothing.
+    let run = |path: &str| -> Value {
+        serde_json::from_slice(&std::fs::read(study.join(path)).expect("run.json")).expect("json")
+    };
+    let old_job = run("ppo/seed-0/run.json")["train_job"]
+        .as_i64()
+        .expect("id");
+    let kept = std::fs::read(study.join("crm-ppo/seed-0/checkpoint.safetensors")).expect("kept");
+    let mut redo = study_args(&out, &data, "2");
+    redo.extend(["--redo".to_string(), "ppo".to_string()]);
+    let redone = succeeded(crm().args(&redo), "crm results --redo ppo");
+    let stderr = String::from_utf8_lossy(&redone.stderr);
+    assert!(stderr.contains("--redo ppo: "), "{stderr}");
+    assert!(
+        stderr.contains("seed 0, ppo") && stderr.contains("seed 1, ppo"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("crm-ppo"), "{stderr}");
+    assert_ne!(
+        run("ppo/seed-0/run.json")["train_job"].as_i64(),
+        Some(old_job)
+    );
+    let file = run("study.json");
+    assert!(
+        file["superseded"]["ppo"]
+            .as_array()
+            .is_some_and(|ids| ids.contains(&Value::from(old_job))),
+        "{file}"
+    );
+    assert!(
+        !file["command"]
+            .as_str()
+            .expect("command")
+            .contains("--redo"),
+        "{file}"
+    );
+    assert_eq!(
+        std::fs::read(study.join("crm-ppo/seed-0/checkpoint.safetensors")).expect("read"),
+        kept
+    );
+    let again = succeeded(crm().args(study_args(&out, &data, "2")), "crm results");
+    assert!(!String::from_utf8_lossy(&again.stderr).contains("sweep "));
+    // An algorithm the study does not have is refused, naming the flag.
+    let mut other = study_args(&out, &data, "2");
+    other.extend(["--redo".to_string(), "lppo".to_string()]);
+    let refused = crm().args(other).output().expect("crm results");
+    assert_eq!(refused.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("--redo lppo: the study builtin has no lppo runs"),
+        "{stderr}"
+    );
     // The report and every plot rebuild byte for byte from the files alone.
     let before = files(&out);
     std::fs::remove_file(out.join("RESULTS.md")).expect("remove");

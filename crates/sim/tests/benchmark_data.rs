@@ -142,3 +142,32 @@ fn the_flat_ablation_spec_is_one_stage_with_every_action() {
         .collect();
     assert_eq!(stages, vec![task]);
 }
+
+/// The flat machine's reward is the staged machine's intra-stage terms summed (docs/LEARNING.md,
+/// "The baselines' rewards"), and its terminal transitions pay what the staged ones do: the
+/// two specs cannot drift apart.
+#[test]
+fn the_flat_ablation_rewards_are_the_staged_machines() {
+    let (flat, staged) = (grasp_sim::spec::flat_spec(), grasping_spec());
+    let staged_terms: Vec<_> = staged
+        .stages
+        .iter()
+        .filter(|s| !s.terminal)
+        .flat_map(|s| s.reward.clone())
+        .collect();
+    let task = flat.stages.iter().find(|s| !s.terminal).expect("one stage");
+    assert_eq!(task.reward, staged_terms);
+    for edge in &flat.transitions {
+        let same = staged
+            .transitions
+            .iter()
+            .find(|e| e.event == edge.event && e.to == edge.to)
+            .unwrap_or_else(|| panic!("the staged machine has no {} edge", edge.event));
+        assert_eq!(
+            (edge.reward, &edge.bonus),
+            (same.reward, &same.bonus),
+            "{}",
+            edge.event
+        );
+    }
+}

@@ -24,7 +24,13 @@ pub fn extend(
     let fields = |f: &StudyFile| -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
         let mut value = serde_json::to_value(f)?;
         let map = value.as_object_mut().context("a study is an object")?;
-        for key in ["command", "seeds", "algorithms", "budget_note"] {
+        for key in [
+            "command",
+            "seeds",
+            "algorithms",
+            "budget_note",
+            "superseded",
+        ] {
             map.remove(key);
         }
         for (key, governed) in FAMILIES {
@@ -61,6 +67,7 @@ pub fn extend(
         seeds,
         algorithms,
         budget_note: asked.budget_note.clone().or(before.budget_note.clone()),
+        superseded: before.superseded.clone(),
         ..asked
     })
 }
@@ -93,6 +100,7 @@ mod tests {
             task_objectives: Default::default(),
             settle_s: None,
             budget_note: None,
+            superseded: Default::default(),
         }
     }
 

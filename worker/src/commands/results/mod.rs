@@ -15,6 +15,7 @@ mod paper;
 mod plot;
 mod reading;
 pub mod record;
+mod redo;
 mod report;
 pub mod stats;
 mod study;
@@ -57,6 +58,15 @@ pub struct ResultsArgs {
     /// Algorithms to compare (repeat; default: all five).
     #[arg(long, value_parser = crate::commands::algorithm())]
     pub algo: Vec<Algorithm>,
+    /// Train these algorithms' runs again (repeat), after a fix to them: their runs are
+    /// removed from the study's folder and their training jobs on the coordinator set aside
+    /// (open ones cancelled), then trained anew. Not part of the command the study records.
+    #[arg(
+        long,
+        value_parser = crate::commands::algorithm(),
+        conflicts_with_all = ["report_only", "stats_of"]
+    )]
+    pub redo: Vec<Algorithm>,
     /// PPO settings for crm-ppo, ippo, lppo and ppo (JSON; default: the paper's).
     #[arg(long, value_name = "FILE")]
     pub ppo_config: Option<PathBuf>,
@@ -265,11 +275,7 @@ fn study(
     };
     let mut file = record::StudyFile {
         name: name.clone(),
-        command: std::env::args()
-            .skip(1)
-            .map(|a| crm_server::launcher::shell_quote(&a))
-            .collect::<Vec<_>>()
-            .join(" "),
+        command: redo::recorded_command(std::env::args().skip(1)),
         world,
         steps: args.steps.unwrap_or_default(),
         envs: args.envs,
@@ -283,12 +289,16 @@ fn study(
         task_objectives,
         settle_s: args.settle_s,
         budget_note: args.budget_note.clone(),
+        superseded: Default::default(),
     };
     let dir = args.out.join("results").join(&name);
     let path = dir.join("study.json");
     if path.exists() {
         let before = record::Study::read(&dir)?.file;
         file = extend::extend(&before, file, &path)?;
+    }
+    if !args.redo.is_empty() {
+        redo::set_aside(rest, &dir, &mut file, &args.redo)?;
     }
     record::write_json(&path, &file)?;
     eprintln!(

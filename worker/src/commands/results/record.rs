@@ -49,6 +49,10 @@ pub struct StudyFile {
     /// Why the budget is what it is (shown in the report).
     #[serde(default)]
     pub budget_note: Option<String>,
+    /// Training jobs set aside by `--redo`, per algorithm: the coordinator's ids of the runs
+    /// trained again, which the study no longer counts.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub superseded: std::collections::BTreeMap<String, Vec<i64>>,
 }
 
 /// `run.json`: one finished training run and its evaluations.
@@ -198,7 +202,7 @@ pub fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
-fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{}: not a valid file", path.display()))

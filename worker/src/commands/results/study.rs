@@ -24,7 +24,7 @@ fn sweep_name(name: &str) -> String {
 }
 
 /// The coordinator's jobs of the study, by id.
-fn study_jobs(rest: &Rest, name: &str) -> anyhow::Result<Vec<Value>> {
+pub fn study_jobs(rest: &Rest, name: &str) -> anyhow::Result<Vec<Value>> {
     let sweeps = rest.get("/api/v1/sweeps?limit=10000")?;
     let mut jobs = Vec::new();
     for sweep in sweeps["sweeps"].as_array().into_iter().flatten() {
@@ -38,14 +38,24 @@ fn study_jobs(rest: &Rest, name: &str) -> anyhow::Result<Vec<Value>> {
     Ok(jobs)
 }
 
-/// The training job of `algorithm` and `seed` among `jobs` that has not failed, the newest.
-fn train_job<'a>(jobs: &'a [Value], algorithm: &str, seed: u64) -> Option<&'a Value> {
+/// The training job of `algorithm` and `seed` among `jobs` that has not failed and was not
+/// set aside (`--redo`), the newest.
+fn train_job<'a>(
+    jobs: &'a [Value],
+    study: &StudyFile,
+    algorithm: &str,
+    seed: u64,
+) -> Option<&'a Value> {
+    let aside = study.superseded.get(algorithm);
     jobs.iter()
         .filter(|j| {
             j["kind"] == "train"
                 && j["algorithm"] == algorithm
                 && j["spec"]["seed"].as_u64() == Some(seed)
                 && !matches!(j["state"].as_str(), Some("failed" | "cancelled"))
+                && !j["id"]
+                    .as_i64()
+                    .is_some_and(|id| aside.is_some_and(|a| a.contains(&id)))
         })
         .max_by_key(|j| j["id"].as_i64())
 }
@@ -243,7 +253,7 @@ pub fn run(
                     continue;
                 }
                 let run_dir = record::run_dir(dir, algorithm, seed);
-                match train_job(&jobs, algorithm, seed) {
+                match train_job(&jobs, study, algorithm, seed) {
                     None if submitted.contains(&(algorithm, seed)) => {
                         let why = "its training job was cancelled or failed on the coordinator";
                         eprintln!("{algorithm} seed {seed}: {why}");
