@@ -363,9 +363,10 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
     );
     let again = succeeded(crm().args(study_args(&out, &data, "2")), "crm results");
     assert!(!String::from_utf8_lossy(&again.stderr).contains("sweep "));
-    // An algorithm the study does not have is refused, naming the flag.
+    // An algorithm the study does not have is refused, naming the flag, before anything of
+    // the others is set aside.
     let mut other = study_args(&out, &data, "2");
-    other.extend(["--redo".to_string(), "lppo".to_string()]);
+    other.extend(["--redo", "ppo", "--redo", "lppo"].map(String::from));
     let refused = crm().args(other).output().expect("crm results");
     assert_eq!(refused.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&refused.stderr);
@@ -373,6 +374,7 @@ fn a_study_survives_interruption_extends_and_rebuilds_its_report_byte_for_byte()
         stderr.contains("--redo lppo: the study builtin has no lppo runs"),
         "{stderr}"
     );
+    assert!(study.join("ppo/seed-0/run.json").is_file(), "{stderr}");
     // The report and every plot rebuild byte for byte from the files alone.
     let before = files(&out);
     std::fs::remove_file(out.join("RESULTS.md")).expect("remove");

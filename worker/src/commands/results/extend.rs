@@ -6,13 +6,7 @@
 
 use anyhow::{Context, bail};
 
-use super::record::StudyFile;
-
-/// The settings key of each algorithm family and the algorithms it governs.
-const FAMILIES: [(&str, &[&str]); 2] = [
-    ("ppo", &["crm-ppo", "ippo", "lppo", "ppo"]),
-    ("sac", &["crm-sac"]),
-];
+use super::record::{StudyFile, settings_field};
 
 /// The study `asked` continuing `before` (the same settings; its seeds and algorithms joined
 /// to the earlier ones), or an error naming the first setting that differs.
@@ -33,12 +27,8 @@ pub fn extend(
         ] {
             map.remove(key);
         }
-        for (key, governed) in FAMILIES {
-            if !before
-                .algorithms
-                .iter()
-                .any(|a| governed.contains(&a.as_str()))
-            {
+        for key in ["ppo", "sac"] {
+            if !before.algorithms.iter().any(|a| settings_field(a) == key) {
                 map.remove(key);
             }
         }

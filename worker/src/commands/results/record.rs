@@ -188,6 +188,16 @@ pub struct Study {
     pub runs: Vec<Run>,
 }
 
+/// The field of [`StudyFile`] holding the settings `algorithm` trains with: `sac` for
+/// CRM-SAC, `ppo` for the PPO family.
+pub fn settings_field(algorithm: &str) -> &'static str {
+    if algorithm == crm_api::Algorithm::CrmSac.name() {
+        "sac"
+    } else {
+        "ppo"
+    }
+}
+
 /// The folder of one run.
 pub fn run_dir(study: &Path, algorithm: &str, seed: u64) -> PathBuf {
     study.join(algorithm).join(format!("seed-{seed}"))

@@ -42,16 +42,21 @@ pub fn set_aside(
     file: &mut StudyFile,
     algorithms: &[Algorithm],
 ) -> anyhow::Result<()> {
+    // Every name is checked before anything is cancelled or removed.
+    if let Some(missing) = algorithms
+        .iter()
+        .map(|a| a.name())
+        .find(|name| !file.algorithms.iter().any(|a| a == name))
+    {
+        bail!(
+            "--redo {missing}: the study {} has no {missing} runs (its algorithms: {})",
+            file.name,
+            file.algorithms.join(", ")
+        );
+    }
     let jobs = study_jobs(rest, &file.name)?;
     for algorithm in algorithms {
         let name = algorithm.name();
-        if !file.algorithms.iter().any(|a| a == name) {
-            bail!(
-                "--redo {name}: the study {} has no {name} runs (its algorithms: {})",
-                file.name,
-                file.algorithms.join(", ")
-            );
-        }
         let mut ids: BTreeSet<i64> = file
             .superseded
             .get(name)

@@ -100,7 +100,7 @@ fn section(text: &mut String, study: &Study, link: &str, reps: usize) {
         .algorithms
         .iter()
         .map(String::as_str)
-        .partition(|a| *a != crm_api::Algorithm::CrmSac.name());
+        .partition(|a| super::record::settings_field(a) == "ppo");
     let mut settings = String::new();
     if !ppo.is_empty() {
         let _ = writeln!(
